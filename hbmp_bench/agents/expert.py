@@ -1,0 +1,111 @@
+"""The rule-based expert: the demonstrator for imitation learning and a reference entry.
+
+It reads M_t for obstacles and the privileged ``info["scene"]`` (speed [m/s], speed limit,
+distance to the stop line [m], light state, signed lane offset to a lane that continues the
+route) that the environment computes from the road map.
+
+Rules, in order: stop for a red (or a yellow it can still stop for) before the stop line; keep a
+braking distance to the nearest obstacle in its lane corridor; move toward the lane that
+continues the route before each junction when the target lane is free; overtake a standing
+obstacle when a neighbouring lane that also continues the route is free; otherwise cruise near
+the speed limit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hbmp_bench.agents.base import register_agent
+from hbmp_bench.envs.observation import ObservationConfig
+
+SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = range(5)
+LANE_WIDTH_M = 3.5
+
+
+@register_agent("expert")
+class ExpertAgent:
+    """Route-aware rule-based driver.
+
+    Args:
+        cruise_fraction: cruise speed as a fraction of the speed limit.
+        comfort_decel: deceleration it plans stops with [m/s²] (the ego brakes at up to 4.5).
+        stop_margin_m: distance kept to a stop line or an obstacle [m].
+        grid: the M_t grid it reads (must match the environment's).
+    """
+
+    name = "expert"
+
+    def __init__(self, cruise_fraction: float = 0.9, comfort_decel: float = 3.0, stop_margin_m: float = 5.0,
+                 grid: ObservationConfig | None = None):
+        self.cruise_fraction = cruise_fraction
+        self.comfort_decel = comfort_decel
+        self.stop_margin_m = stop_margin_m
+        self.grid = grid or ObservationConfig()
+        self._stuck_s = 0.0
+
+    def reset(self, info):
+        self._stuck_s = 0.0
+
+    # ------------------------------------------------------------- helpers
+    def _corridor(self, occupancy: np.ndarray, lane_offset: int, half_width_m: float = 1.6) -> np.ndarray:
+        """Occupied flags per row (rows,) in the corridor of the lane ``lane_offset`` lanes to the left."""
+        g = self.grid
+        centre = g.cols / 2 + lane_offset * LANE_WIDTH_M / g.cell_lat_m
+        half = half_width_m / g.cell_lat_m
+        lo, hi = int(np.floor(centre - half)), int(np.ceil(centre + half))
+        lo, hi = max(lo, 0), min(hi, g.cols)
+        if lo >= hi:
+            return np.zeros(g.rows, dtype=bool)
+        return occupancy[0, :, lo:hi].any(axis=1)
+
+    def _gap_ahead(self, rows: np.ndarray) -> float:
+        """Distance [m] from the ego's front to the first occupied row ahead (inf if none)."""
+        g = self.grid
+        offsets = np.arange(g.rows) * g.cell_long_m - g.back_m
+        ahead = rows & (offsets >= 0.0)
+        return float(offsets[ahead][0] - 2.25) if ahead.any() else float("inf")
+
+    def _lane_free(self, occupancy: np.ndarray, side: int) -> bool:
+        g = self.grid
+        offsets = np.arange(g.rows) * g.cell_long_m - g.back_m
+        window = (offsets >= -10.0) & (offsets <= 15.0)
+        return not self._corridor(occupancy, side)[window].any()
+
+    def _stop_speed(self, distance_m: float) -> float:
+        return float(np.sqrt(2.0 * self.comfort_decel * max(distance_m - self.stop_margin_m, 0.0)))
+
+    # ---------------------------------------------------------------- act
+    def act(self, observation, info):
+        occ, scene, mask = observation["occupancy"], info["scene"], info["action_mask"]
+        road = observation["road"]
+        v, limit = scene["speed_mps"], scene["speed_limit_mps"]
+        target = self.cruise_fraction * limit
+
+        gap = self._gap_ahead(self._corridor(occ, 0))
+        target = min(target, self._stop_speed(gap))
+        light, d_stop = scene["light"], scene["stop_distance_m"]
+        must_stop = light in ("r", "R", "u") or (light in ("y", "Y") and v * v / (2 * 4.5) < d_stop - 1.0)
+        if must_stop:
+            target = min(target, self._stop_speed(d_stop + self.stop_margin_m - 1.0))
+        if not scene["in_junction"] and road[3] < 0.5 and d_stop < 30.0:
+            target = min(target, self._stop_speed(d_stop + self.stop_margin_m - 1.0))
+
+        self._stuck_s = self._stuck_s + 0.1 if (v < 0.5 and gap < 15.0 and not must_stop) else 0.0
+        if not scene["in_junction"]:
+            offset = scene["route_lane_offset"]
+            if offset != 0:
+                side = 1 if offset > 0 else -1
+                action = CHANGE_LEFT if side > 0 else CHANGE_RIGHT
+                if mask[action] and self._lane_free(occ, side):
+                    return action
+            elif self._stuck_s > 3.0:
+                for side, action, alpha in ((1, CHANGE_LEFT, road[2]), (-1, CHANGE_RIGHT, road[4])):
+                    if mask[action] and alpha > 0.5 and self._lane_free(occ, side):
+                        self._stuck_s = 0.0
+                        return action
+
+        if v > target + 0.3:
+            return SPEED_DOWN
+        if v < target - 1.0:
+            return SPEED_UP
+        return KEEP

@@ -1,0 +1,140 @@
+"""Single-ego gymnasium environment: the behavior layer of HBMP on a SUMO town."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from hbmp_bench.envs.observation import ROAD_FEATURES, ObservationConfig
+from hbmp_bench.envs.world import BEHAVIORS, DrivingWorld, WorldConfig
+from hbmp_bench.scenarios import TASKS, check_task, check_town, get_suite, sample_episode, suite_episodes, traffic_for
+
+
+class BehaviorEnv(gym.Env):
+    """HBMP behavior environment.
+
+    ## Description
+    The ego drives from a start to a goal pose along a global route on a SUMO recreation of a
+    CARLA town, among background vehicles and pedestrians driven by SUMO. Each step the agent
+    picks one of five behaviors; the behavior is executed until it completes (event fidelity:
+    within one 0.1 s decision through SUMO's speed and lane-change commands).
+
+    ## Action space
+    ``Discrete(5)``, the paper's order: 0 speed_up, 1 speed_down, 2 change_left, 3 change_right,
+    4 keep. A behavior infeasible for R_t (no lane on that side) is executed as keep;
+    ``info["action_mask"]`` marks the feasible ones. An action outside 0..4 raises ValueError.
+
+    ## Observation space
+    ``Dict(occupancy=Box(0, 1, (1, rows, cols), float32), road=Box(0, 2, (10,), float32))``:
+    M_t and R_t, see :mod:`hbmp_bench.envs.observation` for every cell and entry.
+
+    ## Rewards
+    The paper's r_T, paid when the event happens: +100 goal, −50 collision or timeout, −10 red
+    light, −1 wrong lane / off-road. ``info["reward_components"]`` splits r_k (planner cost,
+    0 in event fidelity) and r_T.
+
+    ## Episode end
+    Terminated at the goal (ego centre within the suite's radius, 2 m), when the ego leaves the
+    network, and, when the suite says so, at a collision (NoCrash) or any violation (the paper's
+    protocol). Truncated at the suite's timeout (route length at 10 km/h + 10 s for CoRL2017).
+    ``info["episode"]`` then holds the episode record.
+
+    ## Arguments
+    town, task: which scenario (``Town01``..``Town05`` or an imported map; ``Straight``, ``OneTurn``,
+        ``Navigation``, ``NavigationDynamic``).
+    suite: episode list and rules (``corl2017`` default, ``hbmp``, ``nocrash-*``).
+    episode_index: fix one episode of the list; None cycles by reset seed (seed % episodes).
+    random_goals: ignore the suite list and draw a fresh start and goal every reset (training).
+    fidelity, decision_period_s: see :class:`WorldConfig`.
+    observation: ``deformed`` or ``vehicle_centric`` M_t; grid options via ``observation_config``.
+    density: override background traffic (``empty``, ``corl``, ``regular``, ``dense``).
+
+    ## Version history
+    v0: first release.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(
+        self,
+        town: str = "Town01",
+        task: str = "Navigation",
+        suite: str = "corl2017",
+        episode_index: int | None = None,
+        random_goals: bool = False,
+        fidelity: str = "event",
+        decision_period_s: float = 0.1,
+        observation: str = "deformed",
+        observation_config: ObservationConfig | None = None,
+        density: str | None = None,
+        render_mode: str | None = None,
+    ):
+        if render_mode is not None:
+            raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None")
+        self.town = check_town(town)
+        self.task = check_task(task)
+        self.suite = get_suite(suite)
+        self.random_goals = random_goals
+        self.density = density
+        obs_cfg = observation_config or ObservationConfig(kind=observation)
+        self.config = WorldConfig(fidelity=fidelity, decision_period_s=decision_period_s, observation=obs_cfg)
+        self.episodes = () if random_goals else suite_episodes(self.suite.name, town, task)
+        if episode_index is not None and not 0 <= episode_index < len(self.episodes):
+            raise ValueError(f"episode_index must be in [0, {len(self.episodes)}), got {episode_index}")
+        self.episode_index = episode_index
+        self.action_space = spaces.Discrete(len(BEHAVIORS))
+        self.observation_space = spaces.Dict(
+            occupancy=spaces.Box(0.0, 1.0, (1, obs_cfg.rows, obs_cfg.cols), dtype=np.float32),
+            road=spaces.Box(0.0, 2.0, (len(ROAD_FEATURES),), dtype=np.float32),
+        )
+        self.render_mode = None
+        self._world: DrivingWorld | None = None
+        self._running = False
+
+    @property
+    def world(self) -> DrivingWorld:
+        if self._world is None:
+            self._world = DrivingWorld(self.town, self.config)
+        return self._world
+
+    def _pick_episode(self, options: dict | None):
+        opts = options or {}
+        if self.random_goals:
+            traffic = traffic_for(self.town, self.task, self.density)
+            seed = int(self.np_random.integers(2**31))
+            return sample_episode(self.town, "Navigation" if self.task == "NavigationDynamic" else self.task,
+                                  np.random.default_rng(seed), suite=self.suite, index=0, seed=seed, traffic=traffic)
+        index = opts.get("episode_index", self.episode_index)
+        if index is None:
+            index = int(self.np_random.integers(len(self.episodes)))
+        episode = self.episodes[index]
+        if self.density is not None:
+            import dataclasses
+
+            episode = dataclasses.replace(episode, traffic=traffic_for(self.town, self.task, self.density))
+        return episode
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        episode = self._pick_episode(options)
+        obs, info = self.world.start(episode, seed=int(self.np_random.integers(2**31)))
+        self._running = True
+        return obs, info
+
+    def step(self, action):
+        if not self._running:
+            raise RuntimeError("call reset() before step() (and again after an episode ends)")
+        if not self.action_space.contains(action) and not (isinstance(action, (int, np.integer)) and 0 <= int(action) < 5):
+            raise ValueError(f"action must be an int in [0, {len(BEHAVIORS)}) ({', '.join(BEHAVIORS)}), got {action!r}")
+        obs, reward, terminated, truncated, info = self.world.step(int(action))
+        if terminated or truncated:
+            self._running = False
+        return obs, reward, terminated, truncated, info
+
+    def close(self):
+        if self._world is not None:
+            self._world.close()
+        self._running = False

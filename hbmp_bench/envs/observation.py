@@ -1,0 +1,209 @@
+"""The sharable representation: occupancy grid M_t and road profile R_t (paper, "State Modeling").
+
+M_t has shape (1, rows, cols): row i covers longitudinal offset [-back_m + i·cell_long_m, +cell_long_m)
+from the ego (row 0 behind, last row ahead), column j covers lateral offset
+[-cols/2·cell_lat_m + j·cell_lat_m, ...) (column 0 on the right). A cell is 1 when any vehicle or
+pedestrian footprint covers it.
+
+- ``deformed`` (default): offsets are curvilinear coordinates (arc length s, signed lateral d) along
+  the centreline of the lane the ego follows along its route, through junctions; the grid is
+  centred on that lane, not on the ego (the paper's deformed M_t).
+- ``vehicle_centric``: offsets in the ego's own frame (x forward, y left), for the ablation.
+
+R_t (``ROAD_FEATURES``, 10 entries, in the paper's order):
+  e_l, e_r       1 if a drivable lane exists left / right of the ego's lane (0 inside a junction)
+  a_l, a_c, a_r  1 if the left / current / right lane continues the route (links to the next route
+                 edge; on the goal edge: is the goal lane); 0 otherwise or if absent
+  l_g, l_y, l_r  one-hot state of the traffic light at the end of the current lane (all 0: none)
+  d_s            distance to the stop line (end of the current lane) / lane length, in [0, 1]
+  dv             speed / speed limit, clipped to [0, 2]
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from hbmp_bench.maps.roadnet import RoadNetwork
+from hbmp_bench.metrics.geometry import box_corners
+
+ROAD_FEATURES = ("e_l", "e_r", "a_l", "a_c", "a_r", "l_g", "l_y", "l_r", "d_s", "dv")
+GREEN, YELLOW, RED = "gGoOs", "yY", "rRu"
+
+
+@dataclass(frozen=True)
+class ObservationConfig:
+    """Grid geometry of M_t.
+
+    Attributes:
+        kind: ``deformed`` or ``vehicle_centric``.
+        rows / cols: grid size.
+        cell_long_m / cell_lat_m: cell size along / across the lane [m].
+        back_m: range behind the ego [m] (ahead = rows·cell_long_m − back_m).
+    """
+
+    kind: str = "deformed"
+    rows: int = 64
+    cols: int = 36
+    cell_long_m: float = 1.0
+    cell_lat_m: float = 0.5
+    back_m: float = 16.0
+
+    def __post_init__(self):
+        if self.kind not in ("deformed", "vehicle_centric"):
+            raise ValueError(f"observation kind must be 'deformed' or 'vehicle_centric', got {self.kind!r}")
+        if self.rows <= 0 or self.cols <= 0 or self.cell_long_m <= 0 or self.cell_lat_m <= 0:
+            raise ValueError("grid sizes must be > 0")
+        if not 0 <= self.back_m < self.rows * self.cell_long_m:
+            raise ValueError("back_m must lie inside the grid")
+
+    @property
+    def ahead_m(self) -> float:
+        return self.rows * self.cell_long_m - self.back_m
+
+    @property
+    def half_width_m(self) -> float:
+        return self.cols * self.cell_lat_m / 2
+
+
+def project_to_polyline(points: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Curvilinear coordinates of points (P, 2) on a polyline (N, 2): arc length s (P,) [m] and
+    signed lateral offset d (P,) [m], positive to the left of the direction of travel."""
+    a, b = line[:-1], line[1:]
+    ab = b - a
+    seg_len = np.maximum(np.hypot(ab[:, 0], ab[:, 1]), 1e-9)
+    unit = ab / seg_len[:, None]
+    cum = np.concatenate([[0.0], np.cumsum(seg_len)])[:-1]
+    rel = points[:, None, :] - a[None]
+    t = np.clip(np.einsum("pmk,mk->pm", rel, unit), 0.0, seg_len)
+    foot = a[None] + t[..., None] * unit[None]
+    dist = np.hypot(*(points[:, None, :] - foot).transpose(2, 0, 1))
+    best = np.argmin(dist, axis=1)
+    rows = np.arange(len(points))
+    r = rel[rows, best]
+    u = unit[best]
+    return cum[best] + t[rows, best], u[:, 0] * r[:, 1] - u[:, 1] * r[:, 0]
+
+
+def _sample_boxes(xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np.ndarray, n_long: int = 10, n_lat: int = 4) -> np.ndarray:
+    """Points (K·n_long·n_lat, 2) spread over K oriented boxes (corners included)."""
+    u = np.linspace(-0.5, 0.5, n_long)
+    v = np.linspace(-0.5, 0.5, n_lat)
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    uu, vv = uu.ravel()[None], vv.ravel()[None]
+    lon = uu * length[:, None]
+    lat = vv * width[:, None]
+    c, s = np.cos(yaw)[:, None], np.sin(yaw)[:, None]
+    return np.stack([xy[:, 0:1] + c * lon - s * lat, xy[:, 1:2] + s * lon + c * lat], axis=-1).reshape(-1, 2)
+
+
+class ObservationBuilder:
+    """Builds M_t and R_t for one network and grid config."""
+
+    def __init__(self, net: RoadNetwork, config: ObservationConfig):
+        self.net = net
+        self.config = config
+        self._path = functools.lru_cache(maxsize=256)(self._followed_path)
+
+    # ------------------------------------------------------------------ M_t
+    def _followed_path(self, lane_id: str, next_edges: tuple[str, ...]) -> np.ndarray:
+        """Polyline (N, 2): ``lane_id`` extended straight back by ``back_m`` and ahead by ``ahead_m``
+        along the lanes that follow the route (``next_edges``) through junctions."""
+        cfg = self.config
+        shape = self.net.lane(lane_id).shape
+        back = shape[0] - shape[1]
+        back = back / max(np.hypot(*back), 1e-9)
+        pieces = [shape[0] + back * cfg.back_m, shape]
+        lane, beyond, k = lane_id, 0.0, 0
+        while beyond < cfg.ahead_m:
+            nxt = self.net.follow(lane, next_edges[k] if k < len(next_edges) else None)
+            if nxt is None:
+                fwd = pieces[-1][-1] - pieces[-1][-2]
+                pieces.append(pieces[-1][-1] + fwd / max(np.hypot(*fwd), 1e-9) * (cfg.ahead_m - beyond))
+                break
+            if nxt in self.net.lanes:
+                k += 1
+            pieces.append(self.net.lane(nxt).shape)
+            beyond += self.net.lane(nxt).length
+            lane = nxt
+        line = np.vstack([np.atleast_2d(p) for p in pieces])
+        keep = np.concatenate([[True], np.hypot(*np.diff(line, axis=0).T) > 1e-6])
+        return line[keep]
+
+    def occupancy(self, ego_xy: np.ndarray, ego_yaw: float, lane_id: str, next_edges: tuple[str, ...],
+                  xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np.ndarray) -> np.ndarray:
+        """M_t (1, rows, cols) float32 from the other actors (K,) arrays."""
+        cfg = self.config
+        grid = np.zeros((1, cfg.rows, cfg.cols), dtype=np.float32)
+        if len(xy) == 0:
+            return grid
+        near = np.hypot(*(xy - ego_xy).T) < cfg.rows * cfg.cell_long_m + 10.0
+        if not near.any():
+            return grid
+        points = _sample_boxes(xy[near], yaw[near], length[near], width[near])
+        if cfg.kind == "deformed":
+            line = self._path(lane_id, next_edges)
+            s, d = project_to_polyline(np.vstack([ego_xy[None], points]), line)
+            lon, lat = s[1:] - s[0], d[1:]
+        else:
+            rel = points - ego_xy
+            c, s_ = np.cos(ego_yaw), np.sin(ego_yaw)
+            lon, lat = rel[:, 0] * c + rel[:, 1] * s_, -rel[:, 0] * s_ + rel[:, 1] * c
+        i = np.floor((lon + cfg.back_m) / cfg.cell_long_m).astype(int)
+        j = np.floor((lat + cfg.half_width_m) / cfg.cell_lat_m).astype(int)
+        ok = (i >= 0) & (i < cfg.rows) & (j >= 0) & (j < cfg.cols)
+        grid[0, i[ok], j[ok]] = 1.0
+        return grid
+
+
+def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[str, ...], route_index: int,
+                 goal_lane: str, speed: float, light: tuple[str, int, float, str] | None) -> tuple[np.ndarray, dict]:
+    """R_t (10,) float32 and the quantities it was made of (metres, m/s) for privileged users.
+
+    Args:
+        lane_id / lane_pos: the ego's lane and front-bumper position on it [m].
+        route / route_index: the episode route and the index of the ego's edge (or of the edge
+            before the junction it is crossing).
+        goal_lane: the lane the goal lies on.
+        speed: ego speed [m/s].
+        light: next traffic light on the route as (tls, link index, distance [m], state) or None.
+    """
+    r = np.zeros(len(ROAD_FEATURES), dtype=np.float32)
+    lane = net.lane(lane_id)
+    in_junction = lane_id not in net.lanes
+    scene = {
+        "speed_mps": float(speed),
+        "speed_limit_mps": float(lane.speed),
+        "in_junction": in_junction,
+        "route_lane_offset": 0,
+        "stop_distance_m": float("inf"),
+        "light": "",
+    }
+    if not in_junction:
+        next_edge = route[route_index + 1] if route_index + 1 < len(route) else None
+        good = set(net.lanes_to(lane.edge, next_edge)) if next_edge else {goal_lane}
+        ids = net.edge_lanes[lane.edge]
+        here = ids.index(lane_id)
+        left = ids[here + 1] if here + 1 < len(ids) else None
+        right = ids[here - 1] if here > 0 else None
+        r[0], r[1] = left is not None, right is not None
+        r[2], r[3], r[4] = left in good, lane_id in good, right in good
+        if lane_id not in good and good:
+            targets = [ids.index(g) for g in good if g in ids]
+            if targets:
+                best = min(targets, key=lambda t: abs(t - here))
+                scene["route_lane_offset"] = int(best - here)
+        remaining = max(lane.length - lane_pos, 0.0)
+        r[8] = np.clip(remaining / max(lane.length, 1e-6), 0.0, 1.0)
+        scene["stop_distance_m"] = remaining
+        if light is not None and light[2] <= remaining + 1.0:
+            state = light[3]
+            r[5], r[6], r[7] = state in GREEN, state in YELLOW, state in RED
+            scene["light"] = state
+            scene["stop_distance_m"] = float(light[2])
+    else:
+        r[3] = 1.0
+    r[9] = np.clip(speed / max(lane.speed, 1e-6), 0.0, 2.0)
+    return r, scene

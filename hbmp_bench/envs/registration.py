@@ -1,0 +1,42 @@
+"""Gymnasium ids: ``hbmp_bench/<Town>-<Task>-v0`` for the five towns and four tasks, plus
+``hbmp_bench/Training-v0`` (random start and goal every reset; Town03 by default, as in the paper)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+
+from hbmp_bench.maps import TOWNS
+from hbmp_bench.scenarios import TASKS
+
+ENTRY_POINT = "hbmp_bench.envs.behavior_env:BehaviorEnv"
+TRAINING_ID = "hbmp_bench/Training-v0"
+
+
+def env_ids() -> tuple[str, ...]:
+    """Every registered id of the package."""
+    return tuple(f"hbmp_bench/{town}-{task}-v0" for town in TOWNS for task in TASKS) + (TRAINING_ID,)
+
+
+def register_envs() -> None:
+    """Register every id (idempotent)."""
+    for town in TOWNS:
+        for task in TASKS:
+            env_id = f"hbmp_bench/{town}-{task}-v0"
+            if env_id not in gym.registry:
+                gym.register(env_id, entry_point=ENTRY_POINT, kwargs={"town": town, "task": task}, disable_env_checker=True)
+    if TRAINING_ID not in gym.registry:
+        gym.register(
+            TRAINING_ID,
+            entry_point=ENTRY_POINT,
+            kwargs={"town": "Town03", "task": "Navigation", "random_goals": True, "suite": "hbmp"},
+            disable_env_checker=True,
+        )
+
+
+def make(env_id: str, **kwargs) -> gym.Env:
+    """``gymnasium.make`` that answers an unknown id with the list of valid ones."""
+    from hbmp_bench.errors import UnknownNameError
+
+    if env_id not in env_ids():
+        raise UnknownNameError("env id", env_id, env_ids())
+    return gym.make(env_id, **kwargs)

@@ -1,0 +1,346 @@
+"""The driving world: one episode in SUMO with the ego, background traffic, detectors and observations.
+
+Environments (gymnasium, later PettingZoo) are thin shells around this class; it owns the
+episode flow so that every shell shares one implementation.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hbmp_bench import __version__
+from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, road_profile
+from hbmp_bench.maps import net_path
+from hbmp_bench.maps.roadnet import RoadNetwork
+from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents
+from hbmp_bench.metrics.geometry import LaneLocator
+from hbmp_bench.metrics.records import EpisodeRecord, driving_score
+from hbmp_bench.scenarios import Episode, road_network
+from hbmp_bench.sim.sumo import EGO_TYPE, SumoSim
+
+EGO_ID = "ego"
+BEHAVIORS = ("speed_up", "speed_down", "change_left", "change_right", "keep")
+SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = range(5)
+
+TERMINAL_REWARD = {
+    "goal": 100.0,
+    "collision": -50.0,
+    "timeout": -50.0,
+    "red_light": -10.0,
+    "wrong_lane": -1.0,
+    "off_road": -1.0,
+}
+"""The paper's r_T: +100 goal, −50 collision or overtime, −10 red light, −1 wrong lane (off-road
+is counted like a wrong lane). Each event pays once, when it happens."""
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """Options of a driving world.
+
+    Attributes:
+        fidelity: ``event`` (the paper's SUMO stage: a behavior completes within one decision
+            through SUMO's lane-change and speed commands).
+        decision_period_s: simulated time per decision in event fidelity [s] (paper: 10 Hz).
+        speed_step_fraction / min_speed_step_mps: speed_up / speed_down change the reference
+            speed by this fraction of the current speed, at least by the minimum step [m/s].
+        observation: M_t grid options.
+        background_route_m: length of the chained route each background vehicle gets, long
+            enough that it circulates for the whole episode [m].
+    """
+
+    fidelity: str = "event"
+    decision_period_s: float = 0.1
+    speed_step_fraction: float = 0.2
+    min_speed_step_mps: float = 2.0
+    observation: ObservationConfig = field(default_factory=ObservationConfig)
+    background_route_m: float = 4000.0
+    step_length_s: float = 0.1
+
+    def __post_init__(self):
+        if self.fidelity not in ("event",):
+            raise ValueError(f"fidelity must be one of ('event',), got {self.fidelity!r}")
+        if self.decision_period_s < self.step_length_s - 1e-9:
+            raise ValueError("decision_period_s must be >= step_length_s")
+        if not 0 < self.speed_step_fraction < 1 or self.min_speed_step_mps <= 0:
+            raise ValueError("speed steps must be positive (fraction in (0, 1))")
+
+    @property
+    def steps_per_decision(self) -> int:
+        return max(1, int(round(self.decision_period_s / self.step_length_s)))
+
+
+def reference_speed(behavior: int, speed: float, limit: float, fraction: float, min_step: float) -> float:
+    """v_ref of a behavior: speed_up / speed_down change the current speed by ``fraction`` of it
+    (at least ``min_step`` [m/s]), capped to [0, limit]; the other behaviors keep the current speed."""
+    step = max(fraction * speed, min_step)
+    if behavior == SPEED_UP:
+        return min(limit, speed + step)
+    if behavior == SPEED_DOWN:
+        return max(0.0, speed - step)
+    return min(speed, limit) if behavior == KEEP else speed
+
+
+class DrivingWorld:
+    """One SUMO episode at a time for one town.
+
+    Args:
+        town: map name.
+        config: world options.
+    """
+
+    def __init__(self, town: str, config: WorldConfig):
+        self.town = town
+        self.config = config
+        self.net: RoadNetwork = road_network(town)
+        self.locator = LaneLocator(self.net)
+        self.observer = ObservationBuilder(self.net, config.observation)
+        self.sim = SumoSim(net_path(town), step_length=config.step_length_s)
+        self.episode: Episode | None = None
+        self._reset_state()
+
+    def _reset_state(self) -> None:
+        self.decisions = 0
+        self.distance_m = 0.0
+        self.progress_m = 0.0
+        self.done_reason = ""
+        self._last_xy: np.ndarray | None = None
+        self._ego = None
+        self._light = None
+
+    # --------------------------------------------------------------- episode
+    def start(self, episode: Episode, seed: int) -> tuple[dict, dict]:
+        """Start ``episode`` with SUMO seed ``seed``; returns the first (observation, info)."""
+        if episode.town != self.town:
+            raise ValueError(f"episode is in {episode.town}, world is {self.town}")
+        self.episode = episode
+        self._reset_state()
+        rng = np.random.default_rng([episode.seed, seed])
+        self.sim.start(seed=int(rng.integers(2**31)))
+        start_edge = self.net.lane(episode.start_lane).edge
+        self.sim.add_vehicle(
+            EGO_ID,
+            episode.route + self._continuation(episode.route[-1]),
+            lane_index=self.net.lane(episode.start_lane).index,
+            pos=episode.start_pos,
+            speed=0.0,
+            vtype=EGO_TYPE,
+        )
+        self.sim.hand_over(EGO_ID)
+        self.sim.set_speed(EGO_ID, 0.0)
+        self._spawn_traffic(rng, start_edge)
+        self.sim.step()
+        self._ego = self.sim.vehicle_state(EGO_ID)
+        if self._ego is None:
+            raise RuntimeError(f"SUMO did not insert the ego for {episode.key}")
+        self._last_xy = self._ego.xy
+        self.goal_xy = self.net.position(episode.goal_lane, episode.goal_pos)
+        self.detector = InfractionDetector(self.locator, self.goal_xy, episode.success_radius_m, episode.timeout_s)
+        self._route_offsets = np.concatenate([[0.0], np.cumsum([self.net.edge_length[e] for e in episode.route])])
+        self._route_pos = {e: i for i, e in enumerate(episode.route)}
+        self._light = self.sim.light_ahead(EGO_ID)
+        return self._observe(StepEvents())
+
+    def _continuation(self, edge: str, length_m: float = 400.0) -> tuple[str, ...]:
+        """Edges after the goal so SUMO does not remove the ego on arrival (straight where possible)."""
+        out, total = [], 0.0
+        while total < length_m:
+            options = self.net.successors(edge)
+            if not options:
+                break
+            edge = next((e for e in options if self.net.direction(edge, e) == "s"), options[0])
+            out.append(edge)
+            total += self.net.edge_length[edge]
+        return tuple(out)
+
+    def _long_route(self, rng: np.random.Generator, edge: str) -> list[str]:
+        route, total = [edge], 0.0
+        edges = self.net.drivable_edges
+        while total < self.config.background_route_m:
+            target = edges[int(rng.integers(len(edges)))]
+            if target == route[-1]:
+                continue
+            dist, prev = self.net.shortest_tree(route[-1])
+            if target not in dist:
+                continue
+            leg = self.net.path_to(prev, route[-1], target)
+            route.extend(leg[1:])
+            total += dist[target]
+        return route
+
+    def _spawn_traffic(self, rng: np.random.Generator, ego_edge: str) -> None:
+        traffic = self.episode.traffic
+        edges = [e for e in self.net.drivable_edges if e != ego_edge and self.net.edge_length[e] > 15.0]
+        for k in range(traffic.vehicles):
+            edge = edges[int(rng.integers(len(edges)))]
+            lane_ids = self.net.edge_lanes[edge]
+            lane = self.net.lanes[lane_ids[int(rng.integers(len(lane_ids)))]]
+            self.sim.add_vehicle(
+                f"bg{k}",
+                self._long_route(rng, edge),
+                lane_index=lane.index,
+                pos=float(rng.uniform(5.0, lane.length - 5.0)),
+                speed=0.0,
+            )
+        walkable = self.net.walkable_edges
+        for k in range(traffic.pedestrians if walkable else 0):
+            path = [walkable[int(rng.integers(len(walkable)))] for _ in range(5)]
+            walks = [(a, b) for a, b in zip(path[:-1], path[1:]) if a != b and self.sim.walk_route_exists(a, b)]
+            if not walks:
+                continue
+            self.sim.add_pedestrian(f"ped{k}", path[0], float(rng.uniform(1.0, self.net.edge_length[path[0]] - 1.0)), walks)
+
+    # ------------------------------------------------------------------ step
+    def action_mask(self) -> np.ndarray:
+        """(5,) int8: 1 where a behavior is feasible for R_t (lane changes need the target lane)."""
+        mask = np.ones(len(BEHAVIORS), dtype=np.int8)
+        lane = self._ego.lane
+        mask[CHANGE_LEFT] = self.net.neighbour_lane(lane, +1) is not None
+        mask[CHANGE_RIGHT] = self.net.neighbour_lane(lane, -1) is not None
+        return mask
+
+    def step(self, behavior: int) -> tuple[dict, float, bool, bool, dict]:
+        """Execute one behavior; returns (observation, reward, terminated, truncated, info)."""
+        mask = self.action_mask()
+        executed = behavior if mask[behavior] else KEEP
+        ego = self._ego
+        limit = self.net.lane(ego.lane).speed
+        cfg = self.config
+        self.sim.set_speed(EGO_ID, reference_speed(executed, ego.speed, limit, cfg.speed_step_fraction, cfg.min_speed_step_mps))
+        if executed in (CHANGE_LEFT, CHANGE_RIGHT):
+            side = +1 if executed == CHANGE_LEFT else -1
+            self.sim.change_lane(EGO_ID, self.net.lane(self.net.neighbour_lane(ego.lane, side)).index)
+        self.decisions += 1
+        total = StepEvents()
+        start_time = self.sim.time
+        for _ in range(cfg.steps_per_decision):
+            events = self._advance()
+            _accumulate(total, events)
+            if self.done_reason:
+                break
+        obs, info = self._observe(total)
+        info["behavior"] = BEHAVIORS[behavior]
+        info["behavior_executed"] = BEHAVIORS[executed]
+        info["duration_s"] = self.sim.time - start_time
+        reward = self._terminal_reward(total)
+        info["reward_components"] = {"r_k": 0.0, "r_T": reward}
+        terminated = self.done_reason in ("goal", "violation", "collision", "left_network")
+        truncated = self.done_reason == "timeout"
+        if terminated or truncated:
+            info["episode"] = self.record().to_dict()
+        return obs, reward, terminated, truncated, info
+
+    def _advance(self) -> StepEvents:
+        """One simulation step plus detection; sets ``done_reason`` when the episode ends."""
+        self.sim.step()
+        state = self.sim.vehicle_state(EGO_ID)
+        if state is None or EGO_ID in self.sim.arrived_ids():
+            self.done_reason = "left_network"
+            return StepEvents()
+        self._ego = state
+        self.distance_m += float(np.hypot(*(state.xy - self._last_xy)))
+        self._last_xy = state.xy
+        self._update_progress(state)
+        self._light = self.sim.light_ahead(EGO_ID)
+        actors = self.sim.snapshot().without(EGO_ID)
+        ev = self.detector.update(
+            EgoFrame(state.xy, state.yaw, EGO_TYPE.length, EGO_TYPE.width,
+                     None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance, self._light.state)),
+            actors.ids, actors.xy, actors.yaw, actors.length, actors.width, actors.is_pedestrian, self.sim.time,
+        )
+        self._actors = actors
+        ep = self.episode
+        if ev.goal_reached:
+            self.done_reason = "goal"
+        elif ev.collisions and (ep.end_on_violation or ep.end_on_collision):
+            self.done_reason = "collision"
+        elif ev.violations and ep.end_on_violation:
+            self.done_reason = "violation"
+        elif ev.timeout:
+            self.done_reason = "timeout"
+        return ev
+
+    def _update_progress(self, state) -> None:
+        k = self._route_pos.get(self.net.lane(state.lane).edge) if state.lane in self.net.lanes else None
+        if k is None:
+            return
+        progress = self._route_offsets[k] + state.lane_pos - self.episode.start_pos
+        if progress <= self.episode.route_length_m + 5.0:
+            self.progress_m = max(self.progress_m, min(progress, self.episode.route_length_m))
+
+    def _terminal_reward(self, ev: StepEvents) -> float:
+        r = TERMINAL_REWARD
+        return float(
+            r["goal"] * ev.goal_reached
+            + r["collision"] * ev.collisions
+            + r["timeout"] * (self.done_reason == "timeout")
+            + r["red_light"] * ev.red_light
+            + r["wrong_lane"] * ev.wrong_lane
+            + r["off_road"] * ev.off_road
+        )
+
+    # ------------------------------------------------------------- observe
+    def _observe(self, events: StepEvents) -> tuple[dict, dict]:
+        ego, ep = self._ego, self.episode
+        route_index = min(ego.route_index, len(ep.route) - 1)
+        light = None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance, self._light.state)
+        road, scene = road_profile(self.net, ego.lane, ego.lane_pos, ep.route, route_index, ep.goal_lane, ego.speed, light)
+        actors = getattr(self, "_actors", None)
+        if actors is None:
+            actors = self.sim.snapshot().without(EGO_ID)
+            self._actors = actors
+        occupancy = self.observer.occupancy(
+            ego.xy, ego.yaw, ego.lane, ep.route[route_index + 1: route_index + 4],
+            actors.xy, actors.yaw, actors.length, actors.width,
+        )
+        scene["goal_distance_m"] = float(np.hypot(*(ego.xy - self.goal_xy)))
+        info = {
+            "action_mask": self.action_mask(),
+            "events": {k: getattr(events, k) for k in EVENT_KINDS},
+            "infractions": dict(self.detector.totals),
+            "time_s": self.sim.time,
+            "route_completion": self.route_completion,
+            "episode_key": ep.key,
+            "scene": scene,
+        }
+        return {"occupancy": occupancy, "road": road}, info
+
+    @property
+    def route_completion(self) -> float:
+        if self.done_reason == "goal":
+            return 1.0
+        return float(np.clip(self.progress_m / self.episode.route_length_m, 0.0, 1.0))
+
+    def record(self, agent: str = "") -> EpisodeRecord:
+        """The episode record so far (final once the episode has ended)."""
+        ep, totals = self.episode, self.detector.totals
+        return EpisodeRecord(
+            suite=ep.suite, town=ep.town, task=ep.task, episode=ep.index, seed=ep.seed, agent=agent,
+            package_version=__version__, fidelity=self.config.fidelity,
+            success=self.done_reason == "goal",
+            route_completion=round(self.route_completion, 4),
+            collision_vehicle=totals["collision_vehicle"], collision_pedestrian=totals["collision_pedestrian"],
+            collision_other=0, wrong_lane=totals["wrong_lane"], off_road=totals["off_road"],
+            red_light=totals["red_light"], timeout=self.done_reason == "timeout",
+            duration_s=round(self.sim.time, 2), distance_m=round(self.distance_m, 2),
+            route_length_m=ep.route_length_m, decisions=self.decisions,
+            driving_score=round(driving_score(self.route_completion, totals), 3),
+            end_reason=self.done_reason or "running",
+        )
+
+    def close(self) -> None:
+        self.sim.close()
+
+
+def _accumulate(total: StepEvents, ev: StepEvents) -> None:
+    for f in dataclasses.fields(StepEvents):
+        value = getattr(ev, f.name)
+        if isinstance(value, bool):
+            setattr(total, f.name, getattr(total, f.name) or value)
+        elif isinstance(value, int):
+            setattr(total, f.name, getattr(total, f.name) + value)
+        else:
+            setattr(total, f.name, getattr(total, f.name) + value)

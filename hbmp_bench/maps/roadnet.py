@@ -1,0 +1,282 @@
+"""Static view of a SUMO network: drivable lanes, connections, routing and lane geometry.
+
+Read once per net file (cached) with sumolib; never starts a simulation. The scenario
+registry routes on it, the observation builders take lane shapes from it and the metric
+detectors locate footprints on it, so every room agrees on one lane graph.
+
+Conventions: lane ids and indices are SUMO's (index 0 is the rightmost lane, which is a
+sidewalk where the edge has one). A *drivable* lane allows the ``passenger`` class.
+Positions are SUMO network coordinates [m].
+"""
+
+from __future__ import annotations
+
+import functools
+import heapq
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import sumolib
+
+TURN_DIRECTIONS = frozenset("lLrR")
+"""SUMO link directions that count as a turn (left, partly left, right, partly right)."""
+
+
+@dataclass(frozen=True)
+class Connection:
+    """One drivable link from a lane of an edge to a lane of the next edge.
+
+    ``via`` is the first internal (junction) lane the link runs over, ``""`` if none;
+    ``direction`` is SUMO's link direction (``s`` straight, ``l``/``L`` left, ``r``/``R``
+    right, ``t`` turnaround); ``tls``/``link_index`` name the traffic light that controls it.
+    """
+
+    from_edge: str
+    from_lane: str
+    to_edge: str
+    to_lane: str
+    via: str
+    direction: str
+    tls: str
+    link_index: int
+
+
+@dataclass(frozen=True)
+class Lane:
+    """A drivable lane: id, SUMO index, shape (N, 2) [m], length [m], width [m], speed [m/s]."""
+
+    id: str
+    edge: str
+    index: int
+    shape: np.ndarray
+    length: float
+    width: float
+    speed: float
+
+
+class RoadNetwork:
+    """Drivable lane graph of one SUMO net.
+
+    Args:
+        net_path: a SUMO ``.net.xml``.
+    """
+
+    def __init__(self, net_path: str | Path):
+        self.path = Path(net_path)
+        net = sumolib.net.readNet(str(self.path), withInternal=True, withPedestrianConnections=False)
+        self.lanes: dict[str, Lane] = {}
+        self.edge_lanes: dict[str, tuple[str, ...]] = {}
+        self.internal_lanes: dict[str, Lane] = {}
+        self.edge_from_to: dict[str, tuple[str, str]] = {}
+        self.junction_shapes: dict[str, np.ndarray] = {}
+        self.walkable_edges: tuple[str, ...] = tuple(
+            sorted(
+                e.getID()
+                for e in net.getEdges(withInternal=False)
+                if e.getFunction() == "" and any(ln.allows("pedestrian") for ln in e.getLanes())
+            )
+        )
+        for edge in net.getEdges(withInternal=True):
+            drivable = [ln for ln in edge.getLanes() if ln.allows("passenger")]
+            if not drivable:
+                continue
+            lanes = [
+                Lane(
+                    id=ln.getID(),
+                    edge=edge.getID(),
+                    index=ln.getIndex(),
+                    shape=np.asarray(ln.getShape(), dtype=float)[:, :2],
+                    length=float(ln.getLength()),
+                    width=float(ln.getWidth()),
+                    speed=float(ln.getSpeed()),
+                )
+                for ln in drivable
+            ]
+            if edge.getFunction() == "internal":
+                for lane in lanes:
+                    self.internal_lanes[lane.id] = lane
+                continue
+            for lane in lanes:
+                self.lanes[lane.id] = lane
+            self.edge_lanes[edge.getID()] = tuple(lane.id for lane in lanes)
+            self.edge_from_to[edge.getID()] = (edge.getFromNode().getID(), edge.getToNode().getID())
+        self.connections: dict[str, tuple[Connection, ...]] = {}
+        for edge_id in self.edge_lanes:
+            edge = net.getEdge(edge_id)
+            conns = []
+            for to_edge, links in edge.getOutgoing().items():
+                if to_edge.getID() not in self.edge_lanes:
+                    continue
+                for c in links:
+                    if c.getFromLane().getID() not in self.lanes or c.getToLane().getID() not in self.lanes:
+                        continue
+                    conns.append(
+                        Connection(
+                            from_edge=edge_id,
+                            from_lane=c.getFromLane().getID(),
+                            to_edge=to_edge.getID(),
+                            to_lane=c.getToLane().getID(),
+                            via=c.getViaLaneID() or "",
+                            direction=c.getDirection(),
+                            tls=c.getTLSID() or "",
+                            link_index=int(c.getTLLinkIndex()),
+                        )
+                    )
+            self.connections[edge_id] = tuple(conns)
+        self.lane_next: dict[str, tuple[tuple[str, str], ...]] = {}
+        for lane_id in list(self.lanes) + list(self.internal_lanes):
+            nxt = []
+            for c in net.getLane(lane_id).getOutgoing():
+                to_lane = c.getToLane().getID()
+                if to_lane not in self.lanes and to_lane not in self.internal_lanes:
+                    continue
+                step = c.getViaLaneID() or to_lane
+                nxt.append((step, self._final_edge(net, step)))
+            self.lane_next[lane_id] = tuple(nxt)
+        for node in net.getNodes():
+            shape = node.getShape()
+            if len(shape) >= 3:
+                self.junction_shapes[node.getID()] = np.asarray(shape, dtype=float)[:, :2]
+        pairs = {v: k for k, v in self.edge_from_to.items()}
+        self.opposite: dict[str, str | None] = {
+            e: pairs.get((t, f)) for e, (f, t) in self.edge_from_to.items()
+        }
+        self.edge_length = {e: self.lanes[ids[0]].length for e, ids in self.edge_lanes.items()}
+        self.drivable_edges: tuple[str, ...] = tuple(sorted(self.edge_lanes))
+        self.tls_ids: tuple[str, ...] = tuple(sorted(t.getID() for t in net.getTrafficLights()))
+
+    def _final_edge(self, net, lane_id: str) -> str:
+        """The normal edge a (possibly internal) lane leads onto."""
+        while lane_id in self.internal_lanes:
+            outgoing = net.getLane(lane_id).getOutgoing()
+            if not outgoing:
+                return ""
+            lane_id = outgoing[0].getViaLaneID() or outgoing[0].getToLane().getID()
+        return self.lanes[lane_id].edge if lane_id in self.lanes else ""
+
+    # ---------------------------------------------------------------- graph
+    def successors(self, edge: str) -> tuple[str, ...]:
+        """Edges reachable from ``edge`` through one junction (no duplicates, sorted)."""
+        return tuple(sorted({c.to_edge for c in self.connections[edge]}))
+
+    def links(self, edge: str, to_edge: str) -> tuple[Connection, ...]:
+        """The lane-level links from ``edge`` to ``to_edge``."""
+        return tuple(c for c in self.connections[edge] if c.to_edge == to_edge)
+
+    def direction(self, edge: str, to_edge: str) -> str:
+        """SUMO link direction of the move ``edge`` → ``to_edge`` (first link's)."""
+        links = self.links(edge, to_edge)
+        if not links:
+            raise ValueError(f"no link from {edge!r} to {to_edge!r}")
+        return links[0].direction
+
+    def turns(self, route: tuple[str, ...] | list[str]) -> tuple[str, ...]:
+        """Link direction at every junction of ``route`` (len(route) - 1 entries)."""
+        return tuple(self.direction(a, b) for a, b in zip(route[:-1], route[1:]))
+
+    def count_turns(self, route: tuple[str, ...] | list[str]) -> int:
+        """Number of junctions where ``route`` turns left or right."""
+        return sum(d in TURN_DIRECTIONS for d in self.turns(route))
+
+    def shortest_tree(self, source: str) -> tuple[dict[str, float], dict[str, str]]:
+        """Dijkstra from the END of ``source`` over edge lengths [m].
+
+        Returns (dist, prev): dist[e] is the length driven from the end of ``source`` to the
+        end of ``e``; prev links each reached edge to its predecessor.
+        """
+        dist = {source: 0.0}
+        prev: dict[str, str] = {}
+        heap = [(0.0, source)]
+        while heap:
+            d, e = heapq.heappop(heap)
+            if d > dist.get(e, np.inf):
+                continue
+            for nxt in self.successors(e):
+                nd = d + self.edge_length[nxt]
+                if nd < dist.get(nxt, np.inf):
+                    dist[nxt] = nd
+                    prev[nxt] = e
+                    heapq.heappush(heap, (nd, nxt))
+        return dist, prev
+
+    @staticmethod
+    def path_to(prev: dict[str, str], source: str, target: str) -> tuple[str, ...]:
+        """Edge sequence from ``source`` to ``target`` read off a ``shortest_tree`` result."""
+        path = [target]
+        while path[-1] != source:
+            path.append(prev[path[-1]])
+        return tuple(reversed(path))
+
+    def shortest_route(self, source: str, target: str) -> tuple[str, ...]:
+        """Shortest edge route from ``source`` to ``target`` (A* in the paper; Dijkstra here)."""
+        if source == target:
+            return (source,)
+        dist, prev = self.shortest_tree(source)
+        if target not in dist:
+            raise ValueError(f"no route from {source!r} to {target!r} in {self.path.name}")
+        return self.path_to(prev, source, target)
+
+    # ------------------------------------------------------------- lanes
+    def lane(self, lane_id: str) -> Lane:
+        """A drivable lane (normal or internal) by id."""
+        lane = self.lanes.get(lane_id) or self.internal_lanes.get(lane_id)
+        if lane is None:
+            raise KeyError(lane_id)
+        return lane
+
+    def lanes_to(self, edge: str, to_edge: str) -> tuple[str, ...]:
+        """Lanes of ``edge`` that have a link onto ``to_edge`` (the lanes that continue a route)."""
+        return tuple(sorted({c.from_lane for c in self.links(edge, to_edge)}))
+
+    def neighbour_lane(self, lane_id: str, side: int) -> str | None:
+        """The drivable lane ``side`` = +1 (left) or -1 (right) of ``lane_id``, else None."""
+        lane = self.lanes.get(lane_id)
+        if lane is None:
+            return None
+        ids = self.edge_lanes[lane.edge]
+        pos = ids.index(lane_id) + side
+        return ids[pos] if 0 <= pos < len(ids) else None
+
+    def follow(self, lane_id: str, next_edge: str | None) -> str | None:
+        """The lane after ``lane_id`` on the way to ``next_edge`` (internal lanes included).
+
+        Falls back to the first successor when no link leads to ``next_edge``; None at a dead end.
+        """
+        options = self.lane_next.get(lane_id, ())
+        for step, edge in options:
+            if edge == next_edge:
+                return step
+        return options[0][0] if options else None
+
+    def rightmost_lane(self, edge: str) -> str:
+        """The rightmost drivable lane of ``edge``."""
+        return self.edge_lanes[edge][0]
+
+    def position(self, lane_id: str, pos: float) -> np.ndarray:
+        """Point (2,) [m] at distance ``pos`` [m] along a lane's shape."""
+        return point_along(self.lane(lane_id).shape, pos)
+
+    def route_length(self, route: tuple[str, ...], start_pos: float, goal_pos: float) -> float:
+        """Driven length [m] from ``start_pos`` on route[0] to ``goal_pos`` on route[-1]."""
+        if len(route) == 1:
+            return goal_pos - start_pos
+        middle = sum(self.edge_length[e] for e in route[1:-1])
+        return self.edge_length[route[0]] - start_pos + middle + goal_pos
+
+
+def point_along(shape: np.ndarray, pos: float) -> np.ndarray:
+    """Point (2,) at arc length ``pos`` [m] along a polyline (N, 2), clipped to its ends."""
+    seg = np.diff(shape, axis=0)
+    seg_len = np.hypot(seg[:, 0], seg[:, 1])
+    cum = np.concatenate([[0.0], np.cumsum(seg_len)])
+    pos = float(np.clip(pos, 0.0, cum[-1]))
+    i = int(np.clip(np.searchsorted(cum, pos, side="right") - 1, 0, len(seg) - 1))
+    frac = (pos - cum[i]) / seg_len[i] if seg_len[i] > 0 else 0.0
+    return shape[i] + frac * seg[i]
+
+
+@functools.lru_cache(maxsize=16)
+def load_road_network(net_path: str) -> RoadNetwork:
+    """The (process-wide cached) RoadNetwork of a net file."""
+    return RoadNetwork(net_path)

@@ -1,0 +1,106 @@
+"""Footprint geometry for the detectors: oriented boxes, overlap tests, lane lookup. Pure numpy."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hbmp_bench.maps.roadnet import RoadNetwork
+
+
+def box_corners(xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np.ndarray) -> np.ndarray:
+    """Corners (K, 4, 2) [m] of K oriented boxes given centres (K, 2), yaw (K,) [rad], sizes (K,) [m]."""
+    xy = np.atleast_2d(xy)
+    c, s = np.cos(yaw), np.sin(yaw)
+    fwd = np.stack([c, s], axis=-1) * (np.asarray(length) / 2)[..., None]
+    left = np.stack([-s, c], axis=-1) * (np.asarray(width) / 2)[..., None]
+    return np.stack([xy + fwd + left, xy - fwd + left, xy - fwd - left, xy + fwd - left], axis=-2)
+
+
+def boxes_overlap(box: np.ndarray, others: np.ndarray) -> np.ndarray:
+    """Separating-axis test of one box (4, 2) against K boxes (K, 4, 2) → (K,) bool (touching counts)."""
+    if len(others) == 0:
+        return np.zeros(0, dtype=bool)
+    a = np.broadcast_to(box, others.shape)
+    overlap = np.ones(len(others), dtype=bool)
+    for poly in (a, others):
+        for edge in range(2):
+            axis = poly[:, edge + 1] - poly[:, edge]
+            axis = np.stack([-axis[:, 1], axis[:, 0]], axis=1)
+            pa = np.einsum("kij,kj->ki", a, axis)
+            pb = np.einsum("kij,kj->ki", others, axis)
+            overlap &= (pa.max(1) >= pb.min(1)) & (pb.max(1) >= pa.min(1))
+    return overlap
+
+
+def footprint_points(xy: np.ndarray, yaw: float, length: float, width: float, n_long: int = 5, n_lat: int = 3) -> np.ndarray:
+    """A regular grid of n_long × n_lat points (P, 2) covering a box evenly (each stands for 1/P of its area)."""
+    u = (np.arange(n_long) + 0.5) / n_long - 0.5
+    v = (np.arange(n_lat) + 0.5) / n_lat - 0.5
+    uu, vv = np.meshgrid(u * length, v * width, indexing="ij")
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.stack([xy[0] + c * uu.ravel() - s * vv.ravel(), xy[1] + s * uu.ravel() + c * vv.ravel()], axis=1)
+
+
+def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """Even-odd ray test of points (P, 2) against a closed polygon (N, 2) → (P,) bool."""
+    x, y = points[:, 0:1], points[:, 1:2]
+    a, b = polygon, np.roll(polygon, -1, axis=0)
+    crosses = (a[:, 1] > y) != (b[:, 1] > y)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x_at = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
+    return (np.sum(crosses & (x < x_at), axis=1) % 2) == 1
+
+
+class LaneLocator:
+    """Which drivable lane (and which way it runs) lies under given points.
+
+    Built once per network: every segment of every normal drivable lane with its half width and
+    unit direction, plus junction polygons (where internal lanes run).
+    """
+
+    def __init__(self, net: RoadNetwork):
+        starts, ends, half, lane_ids = [], [], [], []
+        names = list(net.lanes)
+        for k, lane_id in enumerate(names):
+            lane = net.lanes[lane_id]
+            starts.append(lane.shape[:-1])
+            ends.append(lane.shape[1:])
+            half.append(np.full(len(lane.shape) - 1, lane.width / 2))
+            lane_ids.append(np.full(len(lane.shape) - 1, k))
+        self.lane_names = names
+        self.a = np.concatenate(starts)
+        self.b = np.concatenate(ends)
+        self.half_width = np.concatenate(half)
+        self.lane_index = np.concatenate(lane_ids)
+        ab = self.b - self.a
+        self.seg_len = np.maximum(np.hypot(ab[:, 0], ab[:, 1]), 1e-9)
+        self.unit = ab / self.seg_len[:, None]
+        self.lo = np.minimum(self.a, self.b) - self.half_width[:, None]
+        self.hi = np.maximum(self.a, self.b) + self.half_width[:, None]
+        self.junctions = list(net.junction_shapes.values())
+        self.junction_lo = np.array([j.min(0) for j in self.junctions]).reshape(-1, 2)
+        self.junction_hi = np.array([j.max(0) for j in self.junctions]).reshape(-1, 2)
+
+    def locate(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For points (P, 2): (lane index into ``lane_names`` or -1, lane direction (P, 2), in_junction (P,) bool)."""
+        p_lo, p_hi = points.min(0), points.max(0)
+        near = np.nonzero(np.all(self.hi >= p_lo, axis=1) & np.all(self.lo <= p_hi, axis=1))[0]
+        lane = np.full(len(points), -1)
+        direction = np.zeros((len(points), 2))
+        if len(near):
+            a, u, L = self.a[near], self.unit[near], self.seg_len[near]
+            rel = points[:, None, :] - a[None]
+            t = np.clip(np.einsum("pmk,mk->pm", rel, u), 0.0, L)
+            closest = a[None] + t[..., None] * u[None]
+            dist = np.hypot(*(points[:, None, :] - closest).transpose(2, 0, 1))
+            inside = dist <= self.half_width[near][None]
+            dist = np.where(inside, dist, np.inf)
+            best = np.argmin(dist, axis=1)
+            hit = np.isfinite(dist[np.arange(len(points)), best])
+            lane[hit] = self.lane_index[near[best[hit]]]
+            direction[hit] = u[best[hit]]
+        in_junction = np.zeros(len(points), dtype=bool)
+        jnear = np.nonzero(np.all(self.junction_hi >= p_lo, axis=1) & np.all(self.junction_lo <= p_hi, axis=1))[0]
+        for j in jnear:
+            in_junction |= points_in_polygon(points, self.junctions[j])
+        return lane, direction, in_junction

@@ -1,0 +1,33 @@
+"""Scenario registry: tasks, suites and deterministic episode lists (no SUMO at import)."""
+
+from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS, Episode, Suite, Traffic
+from hbmp_bench.scenarios.suites import (
+    SUITES,
+    all_episodes,
+    check_task,
+    check_town,
+    get_suite,
+    register_suite,
+    road_network,
+    sample_episode,
+    suite_episodes,
+    traffic_for,
+)
+
+__all__ = [
+    "SUITES",
+    "TASKS",
+    "TASK_LABELS",
+    "Episode",
+    "Suite",
+    "Traffic",
+    "all_episodes",
+    "check_task",
+    "check_town",
+    "get_suite",
+    "register_suite",
+    "road_network",
+    "sample_episode",
+    "suite_episodes",
+    "traffic_for",
+]

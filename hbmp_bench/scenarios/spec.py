@@ -1,0 +1,113 @@
+"""Frozen scenario specifications: tasks, suites and the episodes they expand to."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass, field
+
+TASKS: tuple[str, ...] = ("Straight", "OneTurn", "Navigation", "NavigationDynamic")
+"""The CoRL2017 task categories, as used in env ids (``hbmp_bench/Town01-OneTurn-v0``)."""
+
+TASK_LABELS = {
+    "Straight": "Straight",
+    "OneTurn": "One turn",
+    "Navigation": "Navigation",
+    "NavigationDynamic": "Nav. dynamic",
+}
+
+
+@dataclass(frozen=True)
+class Traffic:
+    """Background traffic of an episode: vehicle and pedestrian counts."""
+
+    vehicles: int = 0
+    pedestrians: int = 0
+
+    def __post_init__(self):
+        if self.vehicles < 0 or self.pedestrians < 0:
+            raise ValueError(f"traffic counts must be >= 0, got {self}")
+
+
+@dataclass(frozen=True)
+class Suite:
+    """An evaluation protocol: which towns and tasks, how many episodes, the rules.
+
+    Attributes:
+        name: registry name (``corl2017``, ``hbmp``, ``nocrash-regular`` ...).
+        towns / tasks: what it covers.
+        episodes_per_task: episodes per (town, task).
+        seed: the suite seed; episode lists are a pure function of it.
+        timeout_speed_kmh / timeout_extra_s: timeout = route length at this speed + extra [s].
+        success_radius_m: goal reached when the ego centre is this close to the goal [m].
+        end_on_violation: end the episode at the first collision, red light, wrong lane or
+            off-road (the paper's protocol); CoRL2017 counts infractions and goes on.
+        end_on_collision: end at the first collision (NoCrash: a collision is a failure).
+        density: background traffic for every task (``empty``, ``regular``, ``dense``);
+            ``None`` = CoRL2017 counts on Navigation dynamic, empty roads elsewhere.
+    """
+
+    name: str
+    towns: tuple[str, ...]
+    tasks: tuple[str, ...]
+    episodes_per_task: int
+    seed: int
+    timeout_speed_kmh: float = 10.0
+    timeout_extra_s: float = 10.0
+    success_radius_m: float = 2.0
+    end_on_violation: bool = False
+    end_on_collision: bool = False
+    density: str | None = None
+    description: str = ""
+
+    def __post_init__(self):
+        if self.episodes_per_task <= 0:
+            raise ValueError(f"episodes_per_task must be > 0, got {self.episodes_per_task}")
+        if self.timeout_speed_kmh <= 0:
+            raise ValueError("timeout_speed_kmh must be > 0")
+        unknown = set(self.tasks) - set(TASKS)
+        if unknown:
+            raise ValueError(f"unknown tasks {sorted(unknown)}; valid: {', '.join(TASKS)}")
+
+    def definition_hash(self) -> str:
+        """Short hash of everything that defines the suite's episodes and rules."""
+        blob = json.dumps(asdict(self), sort_keys=True, default=list).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class Episode:
+    """One fully specified episode: map, route, traffic, rules and seed.
+
+    Positions are along SUMO lanes [m]; ``route`` is the edge sequence from the start edge
+    to the goal edge (the shortest route, the paper's A* global route).
+    """
+
+    suite: str
+    town: str
+    task: str
+    index: int
+    seed: int
+    start_lane: str
+    start_pos: float
+    goal_lane: str
+    goal_pos: float
+    route: tuple[str, ...]
+    route_length_m: float
+    turns: int
+    traffic: Traffic = field(default_factory=Traffic)
+    timeout_s: float = 300.0
+    success_radius_m: float = 2.0
+    end_on_violation: bool = False
+    end_on_collision: bool = False
+
+    def __post_init__(self):
+        if not self.route:
+            raise ValueError("route must not be empty")
+        if self.route_length_m <= 0 or self.timeout_s <= 0:
+            raise ValueError(f"route length and timeout must be > 0 ({self.route_length_m}, {self.timeout_s})")
+
+    @property
+    def key(self) -> str:
+        """Unique key of the episode within its suite: ``Town01/Straight/3``."""
+        return f"{self.town}/{self.task}/{self.index}"

@@ -1,0 +1,263 @@
+"""Suites (corl2017, hbmp, nocrash-*) and the deterministic episode lists they expand to.
+
+Episodes are a pure function of (suite, town, task): the suite seed drives a numpy
+generator that picks start and goal poses among the routes of the town's lane graph whose
+task category (turn count) and length fit the task. Nothing here starts SUMO.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import zlib
+
+import numpy as np
+
+from hbmp_bench.errors import UnknownNameError
+from hbmp_bench.maps import TOWNS, available_maps, net_path
+from hbmp_bench.maps.roadnet import RoadNetwork, load_road_network
+from hbmp_bench.scenarios.spec import TASKS, Episode, Suite, Traffic
+
+MEAN_ROUTE_LENGTH_M: dict[str, tuple[float, float, float]] = {
+    "Town01": (200.0, 400.0, 770.0),
+    "Town02": (100.0, 170.0, 360.0),
+    "Town03": (200.0, 400.0, 770.0),
+    "Town04": (300.0, 600.0, 1200.0),
+    "Town05": (250.0, 500.0, 900.0),
+}
+"""Target mean route length [m] for (Straight, One turn, Navigation) per town. Town01/02 are the
+CoRL2017 paper's figures; the others scale with town size. Imported maps use Town01's."""
+
+LENGTH_BAND = (0.5, 1.5)
+"""Accepted route length as a fraction of the task's mean length."""
+
+DENSITIES: dict[str, dict[str, tuple[int, int]]] = {
+    "empty": {"Town01": (0, 0), "Town02": (0, 0)},
+    "corl": {"Town01": (20, 50), "Town02": (15, 50)},
+    "regular": {"Town01": (20, 50), "Town02": (15, 50)},
+    "dense": {"Town01": (100, 250), "Town02": (70, 150)},
+}
+"""(vehicles, pedestrians) per density: CoRL2017 / NoCrash counts for Town01 and Town02; other
+towns scale Town01's counts by directed road length."""
+
+
+SUITES: dict[str, Suite] = {}
+
+
+def register_suite(suite: Suite) -> Suite:
+    """Add a suite to the registry (names are unique)."""
+    if suite.name in SUITES:
+        raise ValueError(f"suite {suite.name!r} is already registered")
+    SUITES[suite.name] = suite
+    return suite
+
+
+register_suite(
+    Suite(
+        name="corl2017",
+        towns=TOWNS,
+        tasks=TASKS,
+        episodes_per_task=25,
+        seed=2017,
+        description="CARLA CoRL2017 rules: 25 episodes per task and town, timeout at 10 km/h + 10 s, "
+        "success within 2 m, infractions counted but do not end the episode.",
+    )
+)
+register_suite(
+    Suite(
+        name="hbmp",
+        towns=TOWNS,
+        tasks=TASKS,
+        episodes_per_task=40,
+        seed=2020,
+        end_on_violation=True,
+        description="The HBMP paper's protocol: 40 episodes per task, the episode ends at the goal or "
+        "at the first rule violation.",
+    )
+)
+for _density in ("empty", "regular", "dense"):
+    register_suite(
+        Suite(
+            name=f"nocrash-{_density}",
+            towns=TOWNS,
+            tasks=("Navigation",),
+            episodes_per_task=25,
+            seed=2019,
+            timeout_speed_kmh=5.0,
+            timeout_extra_s=20.0,
+            end_on_collision=True,
+            density=_density,
+            description=f"NoCrash ({_density} traffic): navigation, a collision is a failure, timeout "
+            "at 5 km/h + 20 s, red lights reported.",
+        )
+    )
+
+
+def get_suite(name: str | Suite) -> Suite:
+    """A registered suite by name (or the suite itself)."""
+    if isinstance(name, Suite):
+        return name
+    try:
+        return SUITES[name]
+    except KeyError:
+        raise UnknownNameError("suite", name, SUITES) from None
+
+
+def check_town(town: str) -> str:
+    """Return ``town`` if it names a built-in or imported map, else raise naming the valid ones."""
+    valid = available_maps()
+    if town not in valid:
+        raise UnknownNameError("town", town, valid)
+    return town
+
+
+def check_task(task: str) -> str:
+    """Return ``task`` if it is a task category, else raise naming the valid ones."""
+    if task not in TASKS:
+        raise UnknownNameError("task", task, TASKS)
+    return task
+
+
+def road_network(town: str) -> RoadNetwork:
+    """The lane graph of a town (cached per process)."""
+    return load_road_network(str(net_path(check_town(town))))
+
+
+def traffic_for(town: str, task: str, density: str | None) -> Traffic:
+    """Background traffic of a (town, task) under a density (None: the task's CoRL default)."""
+    if density is None:
+        density = "corl" if task == "NavigationDynamic" else "empty"
+    if density not in DENSITIES:
+        raise UnknownNameError("density", density, DENSITIES)
+    table = DENSITIES[density]
+    if town in table:
+        return Traffic(*table[town])
+    scale = _road_length(town) / _road_length("Town01")
+    vehicles, pedestrians = table["Town01"]
+    return Traffic(round(vehicles * scale), round(pedestrians * scale))
+
+
+@functools.lru_cache(maxsize=None)
+def _road_length(town: str) -> float:
+    return float(sum(road_network(town).edge_length.values()))
+
+
+@functools.lru_cache(maxsize=None)
+def _route_table(town: str) -> tuple[tuple[str, str, float, int, tuple[str, ...]], ...]:
+    """Every (start edge, goal edge, middle length [m], turns, route) of a town, sorted."""
+    net = road_network(town)
+    rows = []
+    for source in net.drivable_edges:
+        dist, prev = net.shortest_tree(source)
+        for target in sorted(dist):
+            if target == source:
+                continue
+            route = net.path_to(prev, source, target)
+            middle = dist[target] - net.edge_length[target]
+            rows.append((source, target, middle, net.count_turns(route), route))
+    return tuple(rows)
+
+
+def _task_filter(task: str, turns: int) -> bool:
+    if task == "Straight":
+        return turns == 0
+    if task == "OneTurn":
+        return turns == 1
+    return True
+
+
+def _mean_length(town: str, task: str) -> float:
+    means = MEAN_ROUTE_LENGTH_M.get(town, MEAN_ROUTE_LENGTH_M["Town01"])
+    return means[min(TASKS.index(task), 2)]
+
+
+def _seed(*parts: object) -> int:
+    return zlib.crc32("/".join(map(str, parts)).encode())
+
+
+def sample_episode(
+    town: str,
+    task: str,
+    rng: np.random.Generator,
+    *,
+    suite: Suite,
+    index: int,
+    seed: int,
+    traffic: Traffic,
+) -> Episode:
+    """Draw one episode of ``task`` in ``town`` with ``rng``.
+
+    Start and goal positions are drawn on the route's first and last edge; the route is the
+    shortest route between them. Routes whose length falls outside the task's band are
+    rejected; the band widens step by step if a small map has none.
+    """
+    net = road_network(town)
+    rows = [r for r in _route_table(town) if _task_filter(task, r[3])]
+    if not rows:
+        raise ValueError(f"{town} has no route of task {task!r}")
+    mean = _mean_length(town, task)
+    lo, hi = LENGTH_BAND
+    for widen in range(8):
+        factor = 1.0 + 0.5 * widen
+        for _ in range(200):
+            source, target, middle, turns, route = rows[int(rng.integers(len(rows)))]
+            start_len, goal_len = net.edge_length[source], net.edge_length[target]
+            start_pos = float(rng.uniform(0.1, 0.5) * start_len)
+            goal_pos = float(rng.uniform(0.3, 0.9) * goal_len)
+            length = start_len - start_pos + middle + goal_pos
+            if lo / factor * mean <= length <= hi * factor * mean:
+                start_lanes = net.edge_lanes[source]
+                return Episode(
+                    suite=suite.name,
+                    town=town,
+                    task=task,
+                    index=index,
+                    seed=seed,
+                    start_lane=start_lanes[int(rng.integers(len(start_lanes)))],
+                    start_pos=round(start_pos, 2),
+                    goal_lane=net.rightmost_lane(target),
+                    goal_pos=round(goal_pos, 2),
+                    route=route,
+                    route_length_m=round(length, 2),
+                    turns=turns,
+                    traffic=traffic,
+                    timeout_s=round(length / (suite.timeout_speed_kmh / 3.6) + suite.timeout_extra_s, 1),
+                    success_radius_m=suite.success_radius_m,
+                    end_on_violation=suite.end_on_violation,
+                    end_on_collision=suite.end_on_collision,
+                )
+    raise ValueError(f"no {task} route near {mean:.0f} m in {town}")
+
+
+@functools.lru_cache(maxsize=None)
+def suite_episodes(suite_name: str, town: str, task: str) -> tuple[Episode, ...]:
+    """The deterministic episode list of a suite for one (town, task).
+
+    Episode i draws from its own generator seeded by (suite seed, town, pose task, i), so the
+    list is identical for every agent and machine. Navigation with dynamic obstacles uses the
+    same poses as Navigation (as in CoRL2017), with the suite's traffic.
+    """
+    suite = get_suite(suite_name)
+    check_town(town)
+    check_task(task)
+    pose_task = "Navigation" if task == "NavigationDynamic" else task
+    traffic = traffic_for(town, task, suite.density)
+    episodes = []
+    for i in range(suite.episodes_per_task):
+        episode = sample_episode(
+            town,
+            pose_task,
+            np.random.default_rng(_seed(suite.seed, town, pose_task, i)),
+            suite=suite,
+            index=i,
+            seed=_seed(suite.seed, town, task, i) % (2**31),
+            traffic=traffic,
+        )
+        episodes.append(dataclasses.replace(episode, task=task))
+    return tuple(episodes)
+
+
+def all_episodes(suite_name: str) -> list[Episode]:
+    """Every episode of a suite, ordered by town, task and index."""
+    suite = get_suite(suite_name)
+    return [ep for town in suite.towns for task in suite.tasks for ep in suite_episodes(suite.name, town, task)]

@@ -1,0 +1,320 @@
+"""The one place that talks to SUMO: a libsumo simulation and the world snapshot it yields.
+
+libsumo runs one simulation per process, in-process (no socket). ``SumoSim`` starts on
+``start()``, never in ``__init__``; ``close()`` is idempotent. Vehicles and pedestrians are
+read each step through subscriptions (one batched call per kind, not one call per actor).
+
+Angles: SUMO reports degrees clockwise from north; everything leaving this module is
+``yaw`` [rad] counter-clockwise from +x. SUMO's vehicle position is the front bumper; this
+module returns footprint centres.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import libsumo
+import sumo
+
+tc = libsumo.constants
+
+_SUBSCRIBED = (tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED)
+_EGO_SUBSCRIBED = (tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED, tc.VAR_LANE_ID, tc.VAR_LANEPOSITION, tc.VAR_ROUTE_INDEX)
+
+
+@dataclass(frozen=True)
+class VehicleType:
+    """A SUMO vehicle type: footprint [m] and longitudinal limits [m/s²]."""
+
+    id: str
+    length: float = 4.5
+    width: float = 1.8
+    accel: float = 2.6
+    decel: float = 4.5
+    emergency_decel: float = 9.0
+    min_gap: float = 2.5
+    max_speed: float = 30.0
+
+
+EGO_TYPE = VehicleType("hbmp_ego")
+BACKGROUND_TYPE = VehicleType("hbmp_background")
+PEDESTRIAN_SIZE_M = 0.6
+"""Square footprint side of a pedestrian for collision checks [m]."""
+
+
+@dataclass(frozen=True)
+class Actors:
+    """Everything that moves, at one instant. K actors.
+
+    Attributes:
+        ids: (K,) actor ids.
+        xy: (K, 2) footprint centres [m].
+        yaw: (K,) headings [rad].
+        speed: (K,) [m/s].
+        length / width: (K,) footprint [m].
+        is_pedestrian: (K,) bool.
+    """
+
+    ids: tuple[str, ...]
+    xy: np.ndarray
+    yaw: np.ndarray
+    speed: np.ndarray
+    length: np.ndarray
+    width: np.ndarray
+    is_pedestrian: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def without(self, actor_id: str) -> "Actors":
+        """The same snapshot less one actor (e.g. the ego)."""
+        keep = np.array([i != actor_id for i in self.ids], dtype=bool)
+        return Actors(
+            ids=tuple(i for i in self.ids if i != actor_id),
+            xy=self.xy[keep],
+            yaw=self.yaw[keep],
+            speed=self.speed[keep],
+            length=self.length[keep],
+            width=self.width[keep],
+            is_pedestrian=self.is_pedestrian[keep],
+        )
+
+
+@dataclass(frozen=True)
+class VehicleState:
+    """A SUMO vehicle's pose and lane position.
+
+    ``xy`` centre [m], ``yaw`` [rad], ``speed`` [m/s], ``lane`` id (internal lanes start with
+    ``:``), ``lane_pos`` [m] of the front bumper along the lane, ``route_index`` into its route.
+    """
+
+    xy: np.ndarray
+    yaw: float
+    speed: float
+    lane: str
+    lane_pos: float
+    route_index: int
+
+
+@dataclass(frozen=True)
+class LightAhead:
+    """The next traffic light on a vehicle's route: its state char and distance to the stop line [m]."""
+
+    tls: str
+    link_index: int
+    distance: float
+    state: str
+
+
+def sumo_binary() -> str:
+    """Path of the ``sumo`` binary of the eclipse-sumo wheel (libsumo only parses its options)."""
+    return os.path.join(sumo.SUMO_HOME, "bin", "sumo")
+
+
+def sumo_angle_to_yaw(angle_deg: np.ndarray | float) -> np.ndarray | float:
+    """SUMO angle (degrees clockwise from north) → yaw [rad] counter-clockwise from +x."""
+    return np.radians(90.0 - np.asarray(angle_deg))
+
+
+def yaw_to_sumo_angle(yaw: float) -> float:
+    """Yaw [rad] → SUMO angle [deg]."""
+    return (90.0 - math.degrees(yaw)) % 360.0
+
+
+class SumoSim:
+    """One libsumo simulation.
+
+    Args:
+        net_path: SUMO network file.
+        step_length: simulation step [s].
+    """
+
+    _active: "SumoSim | None" = None
+
+    def __init__(self, net_path: str | Path, step_length: float = 0.1):
+        if step_length <= 0:
+            raise ValueError(f"step_length must be > 0, got {step_length}")
+        self.net_path = str(net_path)
+        self.step_length = float(step_length)
+        self._dims: dict[str, tuple[float, float, bool]] = {}
+        self._routes = 0
+
+    # --------------------------------------------------------------- lifecycle
+    @property
+    def running(self) -> bool:
+        return SumoSim._active is self
+
+    def start(self, seed: int) -> None:
+        """(Re)start the simulation with SUMO's ``--seed``; closes a previous run of this object."""
+        if SumoSim._active is not None and SumoSim._active is not self:
+            raise RuntimeError(
+                "libsumo runs one simulation per process and another SumoSim is running; "
+                "close it first or use one worker process per environment"
+            )
+        self.close()
+        libsumo.start(
+            [
+                sumo_binary(),
+                "-n", self.net_path,
+                "--step-length", str(self.step_length),
+                "--seed", str(int(seed)),
+                "--no-step-log", "true",
+                "--no-warnings", "true",
+                "--collision.action", "none",
+                "--time-to-teleport", "-1",
+                "--ignore-route-errors", "true",
+                "--pedestrian.model", "striping",
+                "--default.speeddev", "0.05",
+            ]
+        )
+        SumoSim._active = self
+        self._dims = {}
+        self._routes = 0
+        for vtype in (EGO_TYPE, BACKGROUND_TYPE):
+            libsumo.vehicletype.copy("DEFAULT_VEHTYPE", vtype.id)
+            libsumo.vehicletype.setLength(vtype.id, vtype.length)
+            libsumo.vehicletype.setWidth(vtype.id, vtype.width)
+            libsumo.vehicletype.setAccel(vtype.id, vtype.accel)
+            libsumo.vehicletype.setDecel(vtype.id, vtype.decel)
+            libsumo.vehicletype.setEmergencyDecel(vtype.id, vtype.emergency_decel)
+            libsumo.vehicletype.setMinGap(vtype.id, vtype.min_gap)
+            libsumo.vehicletype.setMaxSpeed(vtype.id, vtype.max_speed)
+
+    def close(self) -> None:
+        """End the simulation; safe to call any number of times."""
+        if SumoSim._active is self:
+            try:
+                libsumo.close()
+            finally:
+                SumoSim._active = None
+
+    @property
+    def time(self) -> float:
+        """Simulation time [s]."""
+        return float(libsumo.simulation.getTime())
+
+    def step(self) -> None:
+        """Advance one step of ``step_length``."""
+        libsumo.simulationStep()
+
+    # ------------------------------------------------------------------ actors
+    def add_vehicle(
+        self,
+        vehicle_id: str,
+        route: tuple[str, ...] | list[str],
+        *,
+        lane_index: int | str = "best",
+        pos: float | str = "base",
+        speed: float | str = 0.0,
+        vtype: VehicleType = BACKGROUND_TYPE,
+    ) -> None:
+        """Insert a vehicle on ``route`` now (SUMO lane index, position [m], speed [m/s])."""
+        route_id = f"r{self._routes}"
+        self._routes += 1
+        libsumo.route.add(route_id, list(route))
+        libsumo.vehicle.add(
+            vehicle_id,
+            route_id,
+            typeID=vtype.id,
+            depart="now",
+            departLane=str(lane_index),
+            departPos=str(pos),
+            departSpeed=str(speed),
+        )
+        self._dims[vehicle_id] = (vtype.length, vtype.width, False)
+        libsumo.vehicle.subscribe(vehicle_id, _EGO_SUBSCRIBED if vtype is EGO_TYPE else _SUBSCRIBED)
+
+    def add_pedestrian(self, person_id: str, edge: str, pos: float, walks: list[tuple[str, str]]) -> None:
+        """Insert a pedestrian at ``pos`` [m] on ``edge`` walking to each (from, to) edge pair in turn."""
+        libsumo.person.add(person_id, edge, pos, depart=tc.DEPARTFLAG_NOW)
+        for from_edge, to_edge in walks:
+            for stage in libsumo.simulation.findIntermodalRoute(from_edge, to_edge, modes=""):
+                libsumo.person.appendStage(person_id, stage)
+        libsumo.person.subscribe(person_id, _SUBSCRIBED)
+        self._dims[person_id] = (PEDESTRIAN_SIZE_M, PEDESTRIAN_SIZE_M, True)
+
+    def walk_route_exists(self, from_edge: str, to_edge: str) -> bool:
+        """True if a pedestrian can walk from ``from_edge`` to ``to_edge``."""
+        stages = libsumo.simulation.findIntermodalRoute(from_edge, to_edge, modes="")
+        return bool(stages) and bool(stages[0].edges)
+
+    def vehicle_ids(self) -> tuple[str, ...]:
+        return tuple(libsumo.vehicle.getIDList())
+
+    def arrived_ids(self) -> tuple[str, ...]:
+        """Vehicles that reached the end of their route in the last step."""
+        return tuple(libsumo.simulation.getArrivedIDList())
+
+    def snapshot(self) -> Actors:
+        """All inserted vehicles and pedestrians now (footprint centres)."""
+        results = []
+        for getter in (libsumo.vehicle.getAllSubscriptionResults, libsumo.person.getAllSubscriptionResults):
+            results.extend(getter().items())
+        k = len(results)
+        ids = tuple(r[0] for r in results)
+        pos = np.array([r[1][tc.VAR_POSITION] for r in results], dtype=float).reshape(k, 2)
+        yaw = sumo_angle_to_yaw(np.array([r[1][tc.VAR_ANGLE] for r in results], dtype=float))
+        speed = np.array([r[1][tc.VAR_SPEED] for r in results], dtype=float)
+        dims = np.array([self._dims.get(i, (4.5, 1.8, False)) for i in ids], dtype=float).reshape(k, 3)
+        length, width, is_ped = dims[:, 0], dims[:, 1], dims[:, 2].astype(bool)
+        heading = np.stack([np.cos(yaw), np.sin(yaw)], axis=1)
+        centre = pos - np.where(is_ped, 0.0, length / 2)[:, None] * heading
+        return Actors(ids, centre, yaw, speed, length, width, is_ped)
+
+    def vehicle_state(self, vehicle_id: str) -> VehicleState | None:
+        """Pose and lane of a subscribed vehicle with lane variables (the ego), None if absent."""
+        r = libsumo.vehicle.getSubscriptionResults(vehicle_id)
+        if not r:
+            return None
+        length = self._dims[vehicle_id][0]
+        yaw = float(sumo_angle_to_yaw(r[tc.VAR_ANGLE]))
+        front = np.asarray(r[tc.VAR_POSITION], dtype=float)
+        return VehicleState(
+            xy=front - length / 2 * np.array([math.cos(yaw), math.sin(yaw)]),
+            yaw=yaw,
+            speed=float(r[tc.VAR_SPEED]),
+            lane=r[tc.VAR_LANE_ID],
+            lane_pos=float(r[tc.VAR_LANEPOSITION]),
+            route_index=int(r[tc.VAR_ROUTE_INDEX]),
+        )
+
+    def light_ahead(self, vehicle_id: str) -> LightAhead | None:
+        """The next traffic light on the vehicle's route, or None."""
+        lights = libsumo.vehicle.getNextTLS(vehicle_id)
+        if not lights:
+            return None
+        tls, link_index, distance, state = lights[0]
+        return LightAhead(tls, int(link_index), float(distance), state)
+
+    def light_state(self, tls: str, link_index: int) -> str:
+        """Current signal char (``r``, ``y``, ``g``, ``G`` ...) of one link of a traffic light."""
+        return libsumo.trafficlight.getRedYellowGreenState(tls)[link_index]
+
+    # ---------------------------------------------------------------- commands
+    def hand_over(self, vehicle_id: str) -> None:
+        """Give a vehicle's driving to the caller: no SUMO lane changes, no safe-speed or red-light
+        braking (only its acceleration limits), so the agent can and must avoid infractions."""
+        libsumo.vehicle.setLaneChangeMode(vehicle_id, 0)
+        libsumo.vehicle.setSpeedMode(vehicle_id, 0b000110)
+
+    def set_speed(self, vehicle_id: str, speed: float) -> None:
+        """Target speed [m/s], reached within the vehicle type's acceleration limits."""
+        libsumo.vehicle.setSpeed(vehicle_id, max(0.0, float(speed)))
+
+    def change_lane(self, vehicle_id: str, lane_index: int) -> None:
+        """Move to SUMO lane ``lane_index`` of the current edge in the next step."""
+        libsumo.vehicle.changeLane(vehicle_id, int(lane_index), self.step_length)
+
+    def set_route(self, vehicle_id: str, route: tuple[str, ...] | list[str]) -> None:
+        """Replace a vehicle's route (must start with its current edge)."""
+        libsumo.vehicle.setRoute(vehicle_id, list(route))
+
+    def move_to_xy(self, vehicle_id: str, edge: str, lane_index: int, xy: np.ndarray, yaw: float, length: float) -> None:
+        """Place a vehicle's centre at ``xy`` with heading ``yaw`` (free placement, route kept if possible)."""
+        front = np.asarray(xy) + length / 2 * np.array([math.cos(yaw), math.sin(yaw)])
+        libsumo.vehicle.moveToXY(vehicle_id, edge, int(lane_index), float(front[0]), float(front[1]), yaw_to_sumo_angle(yaw), 2)
