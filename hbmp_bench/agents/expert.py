@@ -104,7 +104,7 @@ class ExpertAgent:
                         self._stuck_s = 0.0
                         return action
 
-        if v > target + 0.3:
+        if v > target + 0.3 or (target < 0.5 and v > 0.0):
             return SPEED_DOWN
         if v < target - 1.0:
             return SPEED_UP

@@ -1,0 +1,170 @@
+"""``hbmp-bench``: list what exists, run agents, inspect and import maps."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from hbmp_bench.errors import UnknownNameError
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from hbmp_bench.agents import AGENTS
+    from hbmp_bench.envs import env_ids
+    from hbmp_bench.maps import TOWNS, available_maps
+    from hbmp_bench.scenarios import SUITES, TASKS
+
+    listing = {
+        "env_ids": list(env_ids()),
+        "towns": list(TOWNS),
+        "maps": list(available_maps()),
+        "tasks": list(TASKS),
+        "suites": {name: s.description for name, s in SUITES.items()},
+        "agents": sorted(AGENTS),
+    }
+    if args.json:
+        print(json.dumps(listing, indent=2))
+        return 0
+    for key in ("env_ids", "towns", "maps", "tasks", "agents"):
+        print(f"{key}:")
+        for item in listing[key]:
+            print(f"  {item}")
+    print("suites:")
+    for name, text in listing["suites"].items():
+        print(f"  {name:16s} {text}")
+    return 0
+
+
+def _parse_env_id(env_id: str) -> tuple[str, str]:
+    from hbmp_bench.envs import TRAINING_ID, env_ids
+
+    if env_id not in env_ids() or env_id == TRAINING_ID:
+        raise UnknownNameError("env id", env_id, [i for i in env_ids() if i != TRAINING_ID])
+    town, task = env_id.split("/", 1)[1].rsplit("-", 1)[0].split("-", 1)
+    return town, task
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from hbmp_bench.agents import load_agent
+    from hbmp_bench.evaluation import Job, run_jobs
+    from hbmp_bench.metrics import success_table, summarize
+    from hbmp_bench.scenarios import get_suite
+
+    town, task = _parse_env_id(args.env)
+    load_agent(args.agent)  # fail fast on a bad name, before any simulation starts
+    suite = get_suite(args.suite)
+    n = min(args.episodes, suite.episodes_per_task)
+    if args.episodes <= 0:
+        raise ValueError(f"--episodes must be > 0, got {args.episodes}")
+    records = run_jobs([Job(suite.name, town, task, args.agent, tuple(range(n)), args.fidelity)],
+                       workers=1, progress=not args.json)
+    summary = {"env": args.env, "agent": args.agent, "suite": suite.name, **summarize(records)}
+    if args.json:
+        summary["records"] = [r.to_dict() for r in records]
+        print(json.dumps(summary, indent=2))
+    else:
+        print(success_table(records).to_string())
+        for key, value in summary.items():
+            print(f"{key:24s} {value}")
+    return 0
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    import os
+
+    from hbmp_bench.agents import load_agent
+    from hbmp_bench.evaluation import Job, run_jobs
+    from hbmp_bench.metrics import append_record, success_table, summarize
+    from hbmp_bench.scenarios import check_task, check_town, get_suite
+
+    suite = get_suite(args.suite)
+    load_agent(args.agent)
+    towns = [check_town(t) for t in (args.towns or suite.towns)]
+    tasks = [check_task(t) for t in (args.tasks or suite.tasks)]
+    n = min(args.episodes or suite.episodes_per_task, suite.episodes_per_task)
+    jobs = [Job(suite.name, town, task, args.agent, tuple(range(n)), args.fidelity) for town in towns for task in tasks]
+    records = run_jobs(jobs, workers=args.workers or os.cpu_count() or 1)
+    if args.out:
+        os.makedirs(args.out, exist_ok=True)
+        path = os.path.join(args.out, f"{suite.name}__{args.agent.replace(':', '.')}.jsonl")
+        for r in records:
+            append_record(path, r)
+        print(f"records: {path}")
+    print(success_table(records).to_string())
+    print(json.dumps(summarize(records), indent=2))
+    return 0
+
+
+def _cmd_maps(args: argparse.Namespace) -> int:
+    from hbmp_bench.maps import available_maps, import_map, map_stats
+
+    if args.maps_cmd == "stats":
+        names = args.names or list(available_maps())
+        stats = {name: map_stats(name) for name in names}
+        if args.json:
+            print(json.dumps(stats, indent=2))
+        else:
+            for name, s in stats.items():
+                print(name)
+                for key, value in s.items():
+                    print(f"  {key:24s} {value}")
+        return 0
+    if args.maps_cmd == "import":
+        path = import_map(args.file, args.name)
+        print(f"imported {args.name}: {path}")
+        return 0
+    raise AssertionError(args.maps_cmd)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="hbmp-bench", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("list", help="env ids, towns, tasks, suites and agents")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_list)
+
+    p = sub.add_parser("run", help="run an agent for N episodes of one env id and print a summary")
+    p.add_argument("--env", default="hbmp_bench/Town01-Navigation-v0")
+    p.add_argument("--agent", default="expert", help="registry name or module:Class")
+    p.add_argument("--episodes", type=int, default=5)
+    p.add_argument("--suite", default="corl2017")
+    p.add_argument("--fidelity", default="event")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser("evaluate", help="run an agent on a suite (towns x tasks) in worker processes")
+    p.add_argument("--suite", default="corl2017")
+    p.add_argument("--agent", default="expert")
+    p.add_argument("--towns", nargs="*")
+    p.add_argument("--tasks", nargs="*")
+    p.add_argument("--episodes", type=int, default=None, help="episodes per (town, task); default: the suite's")
+    p.add_argument("--workers", type=int, default=None, help="default: one per core")
+    p.add_argument("--fidelity", default="event")
+    p.add_argument("--out", default=None, help="directory for the JSON-lines records")
+    p.set_defaults(func=_cmd_evaluate)
+
+    p = sub.add_parser("maps", help="map statistics and import")
+    msub = p.add_subparsers(dest="maps_cmd", required=True)
+    q = msub.add_parser("stats", help="statistics of built-in and imported maps")
+    q.add_argument("names", nargs="*")
+    q.add_argument("--json", action="store_true")
+    q = msub.add_parser("import", help="import an OpenDRIVE .xodr or SUMO .net.xml under a name")
+    q.add_argument("file")
+    q.add_argument("--name", required=True)
+    p.set_defaults(func=_cmd_maps)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except (UnknownNameError, ValueError, FileNotFoundError) as exc:
+        print(f"hbmp-bench: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,27 @@
+import pytest
+
+from hbmp_bench.agents import AGENTS, Agent, load_agent
+from hbmp_bench.errors import UnknownNameError
+
+
+def test_builtin_agents_implement_the_protocol():
+    for name in ("expert", "random", "keep"):
+        agent = load_agent(name)
+        assert isinstance(agent, Agent) and agent.name == name
+
+
+def test_plugin_by_module_path():
+    agent = load_agent("hbmp_bench.agents.simple:KeepAgent")
+    assert agent.act({}, {}) == 4
+
+
+def test_unknown_agent_lists_valid_names():
+    with pytest.raises(UnknownNameError) as err:
+        load_agent("expret")
+    for name in AGENTS:
+        assert name in str(err.value)
+
+
+def test_bad_plugin_path_is_a_clear_error():
+    with pytest.raises(ValueError, match="cannot load agent"):
+        load_agent("no_such_module:Agent")

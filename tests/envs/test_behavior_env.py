@@ -1,0 +1,102 @@
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import hbmp_bench  # noqa: F401  (registers the ids)
+from hbmp_bench.agents import load_agent
+from hbmp_bench.envs import env_ids, make
+from hbmp_bench.errors import UnknownNameError
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env_id", env_ids())
+def test_check_env_every_id(env_id):
+    env = gym.make(env_id, episode_index=0) if "Training" not in env_id else gym.make(env_id)
+    check_env(env.unwrapped, skip_render_check=True)
+    env.close()
+
+
+def test_make_through_module_prefix():
+    env = gym.make("hbmp_bench:hbmp_bench/Town02-Straight-v0")
+    assert env.action_space.n == 5
+    env.close()
+
+
+def test_unknown_env_id_lists_valid_ones():
+    with pytest.raises(UnknownNameError, match="Town01-Straight-v0"):
+        make("hbmp_bench/Town07-Straight-v0")
+
+
+def _rollout(env, seed, agent="expert", steps=300):
+    agent = load_agent(agent)
+    obs, info = env.reset(seed=seed)
+    agent.reset(info)
+    trace = [obs["road"].copy(), obs["occupancy"].sum()]
+    for _ in range(steps):
+        obs, reward, terminated, truncated, info = env.step(agent.act(obs, info))
+        trace.append((obs["road"].copy(), float(obs["occupancy"].sum()), reward, info["time_s"]))
+        if terminated or truncated:
+            break
+    return trace
+
+
+def test_same_seed_same_episode_with_traffic():
+    env = gym.make("hbmp_bench/Town01-NavigationDynamic-v0").unwrapped
+    a = _rollout(env, seed=3)
+    b = _rollout(env, seed=3)
+    env.close()
+    assert len(a) == len(b)
+    for x, y in zip(a[2:], b[2:]):
+        np.testing.assert_array_equal(x[0], y[0])
+        assert x[1:] == y[1:]
+
+
+def test_out_of_range_action_is_a_clear_error():
+    env = gym.make("hbmp_bench/Town02-Straight-v0", episode_index=0).unwrapped
+    env.reset(seed=0)
+    for bad in (5, -1, 2.5, "left"):
+        with pytest.raises(ValueError, match="action must be an int"):
+            env.step(bad)
+    env.close()
+
+
+def test_infeasible_lane_change_becomes_keep_and_mask_says_so():
+    env = gym.make("hbmp_bench/Town01-Straight-v0", episode_index=0).unwrapped  # one lane per direction
+    obs, info = env.reset(seed=0)
+    assert info["action_mask"].tolist() == [1, 1, 0, 0, 1]
+    _, _, _, _, info = env.step(2)
+    assert info["behavior_executed"] == "keep"
+    env.close()
+
+
+@pytest.mark.slow
+def test_expert_clean_success_on_a_static_episode():
+    env = gym.make("hbmp_bench/Town01-OneTurn-v0", episode_index=0).unwrapped
+    agent = load_agent("expert")
+    obs, info = env.reset(seed=0)
+    agent.reset(info)
+    while True:
+        obs, reward, terminated, truncated, info = env.step(agent.act(obs, info))
+        if terminated or truncated:
+            break
+    record = info["episode"]
+    env.close()
+    assert record["success"] and reward == 100.0
+    assert record["collision_vehicle"] + record["collision_pedestrian"] + record["wrong_lane"] + record["red_light"] + record["off_road"] == 0
+    assert record["route_completion"] == 1.0
+
+
+def test_occupancy_marks_background_vehicles():
+    env = gym.make("hbmp_bench/Town01-NavigationDynamic-v0", episode_index=0).unwrapped
+    agent = load_agent("expert")
+    obs, info = env.reset(seed=0)
+    agent.reset(info)
+    seen = 0.0
+    for _ in range(600):
+        obs, _, terminated, truncated, info = env.step(agent.act(obs, info))
+        seen = max(seen, float(obs["occupancy"].sum()))
+        if terminated or truncated:
+            break
+    env.close()
+    assert seen > 0

@@ -1,0 +1,73 @@
+import pytest
+
+from hbmp_bench.errors import UnknownNameError
+from hbmp_bench.scenarios import TASKS, get_suite, road_network, suite_episodes, traffic_for
+
+
+@pytest.mark.parametrize("town", ["Town01", "Town02"])
+def test_task_categories_follow_the_route_turns(town):
+    net = road_network(town)
+    expected = {"Straight": 0, "OneTurn": 1}
+    for task, turns in expected.items():
+        for ep in suite_episodes("corl2017", town, task):
+            assert net.count_turns(ep.route) == turns == ep.turns
+
+
+def test_episode_lists_are_deterministic_and_complete():
+    first = suite_episodes.__wrapped__("corl2017", "Town01", "Navigation")
+    again = suite_episodes.__wrapped__("corl2017", "Town01", "Navigation")
+    assert first == again
+    assert len(first) == 25
+    assert len({(e.start_lane, e.start_pos, e.goal_lane, e.goal_pos) for e in first}) == 25
+
+
+def test_dynamic_navigation_reuses_navigation_poses_with_corl_traffic():
+    nav = suite_episodes("corl2017", "Town01", "Navigation")
+    dyn = suite_episodes("corl2017", "Town01", "NavigationDynamic")
+    assert [(e.start_lane, e.goal_lane, e.route) for e in nav] == [(e.start_lane, e.goal_lane, e.route) for e in dyn]
+    assert dyn[0].traffic.vehicles == 20 and dyn[0].traffic.pedestrians == 50
+    assert suite_episodes("corl2017", "Town02", "NavigationDynamic")[0].traffic.vehicles == 15
+    assert nav[0].traffic.vehicles == 0
+
+
+def test_corl_timeout_is_route_length_at_10_kmh_plus_10_s():
+    for ep in suite_episodes("corl2017", "Town02", "OneTurn"):
+        assert ep.timeout_s == pytest.approx(ep.route_length_m / (10 / 3.6) + 10.0, abs=0.06)
+
+
+def test_route_length_matches_lane_graph():
+    net = road_network("Town01")
+    for ep in suite_episodes("corl2017", "Town01", "OneTurn")[:5]:
+        assert ep.route == net.shortest_route(ep.route[0], ep.route[-1])
+        assert ep.route_length_m == pytest.approx(net.route_length(ep.route, ep.start_pos, ep.goal_pos), abs=0.02)
+
+
+def test_every_town_and_task_has_a_full_list():
+    suite = get_suite("corl2017")
+    for town in suite.towns:
+        for task in TASKS:
+            assert len(suite_episodes("corl2017", town, task)) == 25
+
+
+def test_hbmp_protocol_ends_on_violations():
+    ep = suite_episodes("hbmp", "Town03", "Navigation")[0]
+    assert ep.end_on_violation and len(suite_episodes("hbmp", "Town03", "Navigation")) == 40
+
+
+def test_scaled_traffic_for_towns_without_a_corl_count():
+    t = traffic_for("Town04", "NavigationDynamic", None)
+    assert t.vehicles > 20  # Town04 has more road than Town01
+
+
+@pytest.mark.parametrize(
+    "call",
+    [
+        lambda: get_suite("corl2018"),
+        lambda: suite_episodes("corl2017", "Town09", "Straight"),
+        lambda: suite_episodes("corl2017", "Town01", "Uturn"),
+    ],
+)
+def test_unknown_names_list_the_valid_ones(call):
+    with pytest.raises(UnknownNameError) as err:
+        call()
+    assert "valid:" in str(err.value)
