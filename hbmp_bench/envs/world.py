@@ -248,7 +248,8 @@ class DrivingWorld:
         actors = self.sim.snapshot().without(EGO_ID)
         ev = self.detector.update(
             EgoFrame(state.xy, state.yaw, EGO_TYPE.length, EGO_TYPE.width,
-                     None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance, self._light.state)),
+                     None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance, self._light.state),
+                     self.net.lanes[state.lane].edge if state.lane in self.net.lanes else ""),
             actors.ids, actors.xy, actors.yaw, actors.length, actors.width, actors.is_pedestrian, self.sim.time,
         )
         self._actors = actors

@@ -51,14 +51,15 @@ class StepEvents:
 
 @dataclass
 class EgoFrame:
-    """The ego at one step: centre (2,) [m], yaw [rad], footprint [m], on a junction or not,
-    and the next traffic light on its route as (tls, link index, distance [m], state) or None."""
+    """The ego at one step: centre (2,) [m], yaw [rad], footprint [m], the next traffic light on its
+    route as (tls, link index, distance [m], state) or None, and the edge it drives on ("" if unknown)."""
 
     xy: np.ndarray
     yaw: float
     length: float
     width: float
     light: tuple[str, int, float, str] | None = None
+    edge: str = ""
 
 
 @dataclass
@@ -102,7 +103,7 @@ class InfractionDetector:
         self._touching = frozenset(touching)
 
         points = footprint_points(ego.xy, ego.yaw, ego.length, ego.width)
-        lane, direction, in_junction = self.locator.locate(points)
+        lane, direction, in_junction = self.locator.locate(points, prefer_edge=ego.edge)
         heading = np.array([np.cos(ego.yaw), np.sin(ego.yaw)])
         on_lane = lane >= 0
         against = on_lane & ~in_junction & (direction @ heading < 0.0)

@@ -77,12 +77,20 @@ class LaneLocator:
         self.unit = ab / self.seg_len[:, None]
         self.lo = np.minimum(self.a, self.b) - self.half_width[:, None]
         self.hi = np.maximum(self.a, self.b) + self.half_width[:, None]
+        self.lane_edge = np.array([net.lanes[n].edge for n in names])
         self.junctions = list(net.junction_shapes.values())
         self.junction_lo = np.array([j.min(0) for j in self.junctions]).reshape(-1, 2)
         self.junction_hi = np.array([j.max(0) for j in self.junctions]).reshape(-1, 2)
 
-    def locate(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """For points (P, 2): (lane index into ``lane_names`` or -1, lane direction (P, 2), in_junction (P,) bool)."""
+    def segment_is_edge(self, segments: np.ndarray, edge: str) -> np.ndarray:
+        """(len(segments),) bool: which of the given segment indices belong to lanes of ``edge``."""
+        return self.lane_edge[self.lane_index[segments]] == edge
+
+    def locate(self, points: np.ndarray, prefer_edge: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For points (P, 2): (lane index into ``lane_names`` or -1, lane direction (P, 2), in_junction (P,) bool).
+
+        A point on a lane of ``prefer_edge`` (the ego's own edge) is assigned to it even where another
+        lane lies under it in plan view (a ramp bridging a carriageway)."""
         p_lo, p_hi = points.min(0), points.max(0)
         near = np.nonzero(np.all(self.hi >= p_lo, axis=1) & np.all(self.lo <= p_hi, axis=1))[0]
         lane = np.full(len(points), -1)
@@ -94,6 +102,9 @@ class LaneLocator:
             closest = a[None] + t[..., None] * u[None]
             dist = np.hypot(*(points[:, None, :] - closest).transpose(2, 0, 1))
             inside = dist <= self.half_width[near][None]
+            if prefer_edge:
+                own = inside & self.segment_is_edge(near, prefer_edge)[None]
+                inside = np.where(own.any(axis=1, keepdims=True), own, inside)
             dist = np.where(inside, dist, np.inf)
             best = np.argmin(dist, axis=1)
             hit = np.isfinite(dist[np.arange(len(points)), best])
