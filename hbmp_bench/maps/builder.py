@@ -30,7 +30,7 @@ NETCONVERT_OPTIONS: tuple[str, ...] = (
     "--geometry.remove", "false",
     "--roundabouts.guess", "false",    # roundabouts are declared in the spec
     "--tls.guess", "false",
-    "--tls.cycle.time", "40",          # s; CARLA's lights cycle in ~40 s, netconvert's default is 90
+    "--tls.cycle.time", "30",          # s; short CARLA-like light cycles (netconvert default: 90)
     "--offset.disable-normalization", "true",
     "--output.street-names", "false",
     "--xml-validation", "never",
