@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hbmp_bench.maps.roadnet import RoadNetwork
-from hbmp_bench.metrics.geometry import box_corners
+from hbmp_bench.planning.frame import Path
 
 ROAD_FEATURES = ("e_l", "e_r", "a_l", "a_c", "a_r", "l_g", "l_y", "l_r", "d_s", "dv")
 GREEN, YELLOW, RED = "gGoOs", "yY", "rRu"
@@ -68,25 +68,6 @@ class ObservationConfig:
         return self.cols * self.cell_lat_m / 2
 
 
-def project_to_polyline(points: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Curvilinear coordinates of points (P, 2) on a polyline (N, 2): arc length s (P,) [m] and
-    signed lateral offset d (P,) [m], positive to the left of the direction of travel."""
-    a, b = line[:-1], line[1:]
-    ab = b - a
-    seg_len = np.maximum(np.hypot(ab[:, 0], ab[:, 1]), 1e-9)
-    unit = ab / seg_len[:, None]
-    cum = np.concatenate([[0.0], np.cumsum(seg_len)])[:-1]
-    rel = points[:, None, :] - a[None]
-    t = np.clip(np.einsum("pmk,mk->pm", rel, unit), 0.0, seg_len)
-    foot = a[None] + t[..., None] * unit[None]
-    dist = np.hypot(*(points[:, None, :] - foot).transpose(2, 0, 1))
-    best = np.argmin(dist, axis=1)
-    rows = np.arange(len(points))
-    r = rel[rows, best]
-    u = unit[best]
-    return cum[best] + t[rows, best], u[:, 0] * r[:, 1] - u[:, 1] * r[:, 0]
-
-
 def _sample_boxes(xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np.ndarray, n_long: int = 10, n_lat: int = 4) -> np.ndarray:
     """Points (K·n_long·n_lat, 2) spread over K oriented boxes (corners included)."""
     u = np.linspace(-0.5, 0.5, n_long)
@@ -108,7 +89,7 @@ class ObservationBuilder:
         self._path = functools.lru_cache(maxsize=256)(self._followed_path)
 
     # ------------------------------------------------------------------ M_t
-    def _followed_path(self, lane_id: str, next_edges: tuple[str, ...]) -> np.ndarray:
+    def _followed_path(self, lane_id: str, next_edges: tuple[str, ...]) -> Path:
         """Polyline (N, 2): ``lane_id`` extended straight back by ``back_m`` and ahead by ``ahead_m``
         along the lanes that follow the route (``next_edges``) through junctions."""
         cfg = self.config
@@ -128,9 +109,7 @@ class ObservationBuilder:
             pieces.append(self.net.lane(nxt).shape)
             beyond += self.net.lane(nxt).length
             lane = nxt
-        line = np.vstack([np.atleast_2d(p) for p in pieces])
-        keep = np.concatenate([[True], np.hypot(*np.diff(line, axis=0).T) > 1e-6])
-        return line[keep]
+        return Path(np.vstack([np.atleast_2d(p) for p in pieces]), max_spacing=None)
 
     def occupancy(self, ego_xy: np.ndarray, ego_yaw: float, lane_id: str, next_edges: tuple[str, ...],
                   xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np.ndarray) -> np.ndarray:
@@ -144,9 +123,10 @@ class ObservationBuilder:
             return grid
         points = _sample_boxes(xy[near], yaw[near], length[near], width[near])
         if cfg.kind == "deformed":
-            line = self._path(lane_id, next_edges)
-            s, d = project_to_polyline(np.vstack([ego_xy[None], points]), line)
-            lon, lat = s[1:] - s[0], d[1:]
+            path = self._path(lane_id, next_edges)
+            s_ego, _ = path.frenet(ego_xy)
+            s, lat = path.frenet(points, hint_s=s_ego, window=(cfg.back_m + 10.0, cfg.ahead_m + 10.0))
+            lon = s - s_ego
         else:
             rel = points - ego_xy
             c, s_ = np.cos(ego_yaw), np.sin(ego_yaw)

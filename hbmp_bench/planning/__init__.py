@@ -1,0 +1,40 @@
+"""Behavior-conditioned motion planning of HBMP (pure numpy, simulator-agnostic).
+
+Modules:
+    frame      -- :class:`Path`: curvilinear frame on a lane centerline.
+    control    -- lane-converging control law and linear speed profile.
+    behaviors  -- :class:`Behavior` enum and the reference-speed rule.
+    state      -- :class:`VehicleState`, :class:`Obstacles`.
+    planner    -- sampling planner :func:`plan` with the paper's costs.
+    vehicle    -- kinematic bicycle model with actuator limits.
+    tracking   -- PID speed + pure-pursuit steering tracker.
+    executor   -- :class:`BehaviorExecutor` (replan + track until the behavior ends).
+    sim        -- SUMO-free closed loop used by tests.
+
+Units: metres, seconds, radians, m/s; yaw counter-clockwise from +x, lateral error
+positive to the left.
+"""
+
+from .behaviors import Behavior, BehaviorConfig, reference_speed
+from .control import control_law, linear_speed_profile, omega_limit
+from .executor import (BehaviorExecutor, BehaviorOutcome, ExecutorConfig, ReferencePaths,
+                       reward_from_cost, target_path)
+from .frame import Path, wrap_angle
+from .planner import COST_NAMES, PlannerConfig, PlanningProblem, PlanResult, plan
+from .sim import Rollout, simulate_behavior
+from .state import Obstacles, VehicleState
+from .tracking import PID, TrackerConfig, TrajectoryTracker
+from .vehicle import Control, VehicleParams, step
+
+__all__ = [
+    "Behavior", "BehaviorConfig", "reference_speed",
+    "control_law", "linear_speed_profile", "omega_limit",
+    "BehaviorExecutor", "BehaviorOutcome", "ExecutorConfig", "ReferencePaths",
+    "reward_from_cost", "target_path",
+    "Path", "wrap_angle",
+    "COST_NAMES", "PlannerConfig", "PlanningProblem", "PlanResult", "plan",
+    "Rollout", "simulate_behavior",
+    "Obstacles", "VehicleState",
+    "PID", "TrackerConfig", "TrajectoryTracker",
+    "Control", "VehicleParams", "step",
+]

@@ -1,0 +1,484 @@
+"""Behavior-conditioned sampling motion planner (paper: "Behavior Conditioned Motion Planner").
+
+Given a reference path (the target lane's centerline) and a reference speed ``v_ref``,
+:func:`plan` spans DWA-like samples of the initial speed ``v(0)`` and angular velocity
+``omega(0)``, rolls every sample forward with the lane-converging control law of
+:mod:`.control` (so all samples converge to the reference lane, unlike plain DWA), scores
+them and returns the cheapest collision-free one.
+
+Samples (S = n_v * n_omega + 2):
+
+* ``v(0) = v + linspace(-decel, +accel, n_v) * v_window_time`` (the dynamic window of one
+  control period by default), clipped to ``[0, max(v, speed_limit)]``; ``v(t)`` then follows
+  :func:`.control.linear_speed_profile` from ``v(0)`` to ``v_ref``.
+* ``omega(0) = omega_nom + d_omega``, ``d_omega in linspace(-omega_spread, +omega_spread,
+  n_omega)``, where ``omega_nom`` is the control law at the current state; the offset
+  ``d_omega`` is added to the control law for ``omega_hold`` [s], then the plain control law
+  takes over (so the ``d_omega = 0`` sample is the pure control-law trajectory).
+* two braking samples that follow the lane with the control law: a comfortable stop
+  (``decel``) and a full brake (``brake_decel``), index ``brake_index`` (always present).
+
+Roll-out (kinematic unicycle, ``k = 0 .. n_steps - 1``)::
+
+    x += v_k cos(psi + omega_k dt / 2) dt;  y += v_k sin(psi + omega_k dt / 2) dt;
+    psi += omega_k dt
+
+with ``omega_k`` = control law at step k (gains scheduled above ``gain_speed``) clipped to
+:func:`.control.omega_limit` (yaw-rate limit, curvature / steering limit
+``max_curvature |v|``, lateral-acceleration limit). The midpoint heading is the exact chord
+direction of a constant-``omega`` arc; plain Euler with ``cos(psi)`` drifts systematically
+to the outside of curves (~0.1 m at 8 m/s on R = 40 m). ``(s, e, theta_e, kappa)`` of
+every sample is re-projected on the reference at every step (windowed search on a local
+uniformly resampled copy, ``path_resolution`` m).
+
+Costs per sample, over the future steps ``t_k = k dt, k = 1..n_steps``:
+
+* ``c_velocity = sum_k t_k^2 |v_ref - v(t_k)| / sum_k t_k^2``  [m/s] (paper, exactly);
+* ``c_dist = 1 / (1 + sum_k |v(t_k)|)`` (paper's form, exactly: the sum is over the
+  planning steps of speeds in m/s, i.e. travelled distance / dt; units 1/(m/s));
+* ``c_obs`` -- the paper writes ``sum_t d_olon(t) + kappa d_olat(t)``, which would *reward*
+  being close to obstacles; we keep its combined distance ``d = d_lon + kappa_obs d_lat``
+  but turn it into a proximity penalty::
+
+      c_obs = mean_k sum_o exp(-(g_lon + kappa_obs g_lat) / sigma_obs)
+
+  where ``g_lon = max(|s_o - s| - (L + L_o)/2, 0)`` and ``g_lat = max(|e_o - e| - (W + W_o)/2,
+  0)`` are the bumper-to-bumper longitudinal and side-to-side lateral gaps [m] between the
+  sample and obstacle ``o`` in the reference path's curvilinear frame. Obstacles are
+  projected once at t = 0 and predicted at constant ``(s_dot, e_dot)`` in that frame (this
+  keeps lane-following cars in their lane on curves; on straight paths it equals the
+  Cartesian constant-velocity prediction). Dimensionless, in ``[0, K]``.
+* ``c_total = w_velocity c_velocity + w_dist c_dist + w_obs c_obs``.
+
+Collision check: ego footprint (``length`` x ``width`` inflated by ``safety_margin`` on
+each side) against obstacle footprints (oriented rectangles, Cartesian constant-velocity
+prediction along their heading) at every future step: bounding-circle broad phases
+(per-step sample bounding box, then per sample) followed by an exact separating-axis test
+on the candidate pairs. A sample that touches an obstacle is infeasible. The cheapest
+feasible sample is chosen (ties within ``tie_tolerance`` go to the sample nearest the
+nominal one); if none is feasible, ``collision_free`` is False and the chosen sample is the cheapest one
+(``infeasible_fallback="min_cost"``, default) or the full brake (``"brake"``); the full
+brake index is always reported in :attr:`PlanResult.brake_index`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .control import control_law, linear_speed_profile, omega_limit
+from .frame import Path, wrap_angle
+from .state import Obstacles, VehicleState
+
+__all__ = ["PlannerConfig", "PlanningProblem", "PlanResult", "plan", "COST_NAMES"]
+
+#: Column names of :attr:`PlanResult.costs`.
+COST_NAMES = ("velocity", "dist", "obs")
+
+
+def _pos(name, value, allow_zero=False, allow_inf=False):
+    ok = value >= 0 if allow_zero else value > 0
+    if not ok or value != value or (not allow_inf and math.isinf(value)):
+        rel = ">= 0" if allow_zero else "> 0"
+        raise ValueError(f"PlannerConfig.{name} must be finite and {rel}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Planner parameters (SI units).
+
+    Attributes:
+        horizon: planning horizon [s] (an integer multiple of ``dt``).
+        dt: roll-out step [s] (the control / replanning period).
+        n_v: number of ``v(0)`` samples.
+        n_omega: number of ``omega(0)`` samples.
+        v_window_time: ``v(0)`` spans ``[-decel, +accel] * v_window_time`` around the
+            current speed [s] (DWA window; default one control period).
+        omega_spread: ``omega(0)`` spans ``omega_nom +- omega_spread`` [rad/s].
+        omega_hold: the ``omega(0)`` offset is applied this long before the plain control
+            law takes over [s] (at least one step).
+        accel: acceleration of the speed profile [m/s^2].
+        decel: deceleration of the speed profile and of the comfortable stop [m/s^2].
+        brake_decel: deceleration of the full-brake sample [m/s^2].
+        yaw_rate_max: yaw-rate limit [rad/s].
+        max_curvature: path curvature limit from steering, ``|omega| <= max_curvature |v|``
+            [1/m] (0.2 ~ tan(0.5 rad) / 2.8 m wheelbase).
+        lat_accel_max: lateral-acceleration limit ``|omega v|`` [m/s^2] (``inf`` disables).
+        k_theta: heading gain of the control law [1/m].
+        k_e: lateral gain of the control law [1/m^2] (``k_theta = 2 sqrt(k_e)`` is
+            critically damped in distance).
+        gain_speed: above this speed [m/s] the gains are scheduled as
+            ``k_theta * (gain_speed / |v|)`` and ``k_e * (gain_speed / |v|)^2`` (same damping
+            ratio, time-domain bandwidth capped) so lane changes at highway speed do not
+            saturate the lateral-acceleration limit and overshoot; ``inf`` = constant gains
+            exactly as in the paper.
+        w_velocity, w_dist, w_obs: weights of the cost terms.
+        kappa_obs: lateral weight ``kappa`` in ``d_lon + kappa d_lat`` of ``c_obs``.
+        sigma_obs: length scale of the ``c_obs`` exponential [m].
+        length, width: ego footprint [m].
+        safety_margin: footprint inflation on each side for the collision check [m].
+        path_resolution: spacing of the local resampled reference used in roll-outs [m].
+        tie_tolerance: samples whose ``c_total`` is within this of the minimum count as
+            tied; among them the one closest to the nominal sample (smallest normalised
+            ``|omega(0) - omega_nom|`` + ``|v(0) - v|``) is chosen. Without it, exact ties
+            (e.g. no obstacles: the paper's costs do not depend on ``omega``) would pick an
+            arbitrary swerving sample.
+        infeasible_fallback: ``"min_cost"`` or ``"brake"`` (choice when nothing is
+            collision-free).
+    """
+
+    horizon: float = 3.0
+    dt: float = 0.1
+    n_v: int = 7
+    n_omega: int = 9
+    v_window_time: float = 0.1
+    omega_spread: float = 0.3
+    omega_hold: float = 0.5
+    accel: float = 2.0
+    decel: float = 3.0
+    brake_decel: float = 6.0
+    yaw_rate_max: float = 0.6
+    max_curvature: float = 0.2
+    lat_accel_max: float = 4.0
+    k_theta: float = 0.7
+    k_e: float = 0.12
+    gain_speed: float = 6.0
+    w_velocity: float = 1.0
+    w_dist: float = 1.0
+    w_obs: float = 1.0
+    kappa_obs: float = 20.0
+    sigma_obs: float = 10.0
+    length: float = 4.6
+    width: float = 1.9
+    safety_margin: float = 0.2
+    path_resolution: float = 1.0
+    tie_tolerance: float = 1e-3
+    infeasible_fallback: str = "min_cost"
+
+    def __post_init__(self):
+        for name in ("horizon", "dt", "accel", "decel", "brake_decel", "yaw_rate_max",
+                     "max_curvature", "k_theta", "k_e", "sigma_obs", "length", "width",
+                     "path_resolution"):
+            _pos(name, getattr(self, name))
+        for name in ("v_window_time", "omega_spread", "omega_hold", "w_velocity", "w_dist",
+                     "w_obs", "kappa_obs", "safety_margin", "tie_tolerance"):
+            _pos(name, getattr(self, name), allow_zero=True)
+        _pos("lat_accel_max", self.lat_accel_max, allow_inf=True)
+        _pos("gain_speed", self.gain_speed, allow_inf=True)
+        for name in ("n_v", "n_omega"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1:
+                raise ValueError(f"PlannerConfig.{name} must be an int >= 1, got {v!r}")
+        n = round(self.horizon / self.dt)
+        if n < 1 or abs(n * self.dt - self.horizon) > 1e-6 * max(1.0, self.horizon):
+            raise ValueError(
+                f"PlannerConfig.horizon ({self.horizon}) must be a positive multiple of "
+                f"dt ({self.dt})")
+        if self.infeasible_fallback not in ("min_cost", "brake"):
+            raise ValueError(
+                f"PlannerConfig.infeasible_fallback must be 'min_cost' or 'brake', "
+                f"got {self.infeasible_fallback!r}")
+
+    @property
+    def n_steps(self) -> int:
+        """Number of roll-out steps (trajectories have ``n_steps + 1`` points)."""
+        return round(self.horizon / self.dt)
+
+    @property
+    def n_samples(self) -> int:
+        """S = ``n_v * n_omega + 2`` (grid + comfortable stop + full brake)."""
+        return self.n_v * self.n_omega + 2
+
+
+@dataclass(frozen=True, eq=False)
+class PlanningProblem:
+    """One planning query.
+
+    Attributes:
+        ego: current ego state (footprint centre, yaw, speed).
+        path: reference path = centerline of the target lane.
+        v_ref: reference speed [m/s] (>= 0).
+        speed_limit: lane speed limit [m/s] (> 0); caps the ``v(0)`` samples.
+        obstacles: surrounding vehicles (predicted at constant velocity); an
+            :class:`Obstacles`, a ``(K, 6)`` array of ``x, y, yaw, v, length, width`` rows, or
+            ``None``. Must not contain the ego itself.
+        s_hint: optional previous arc length of the ego on ``path`` [m] (windowed search).
+    """
+
+    ego: VehicleState
+    path: Path
+    v_ref: float
+    speed_limit: float
+    obstacles: Obstacles = field(default_factory=Obstacles.empty)
+    s_hint: float | None = None
+
+    def __post_init__(self):
+        if not isinstance(self.ego, VehicleState):
+            raise ValueError(f"ego must be a VehicleState, got {type(self.ego).__name__}")
+        if not isinstance(self.path, Path):
+            raise ValueError(f"path must be a Path, got {type(self.path).__name__}")
+        if self.obstacles is None:
+            object.__setattr__(self, "obstacles", Obstacles.empty())
+        elif not isinstance(self.obstacles, Obstacles):
+            arr = np.asarray(self.obstacles, dtype=float)
+            if arr.ndim != 2 or arr.shape[1] != 6:
+                raise ValueError("obstacles must be Obstacles or a (K, 6) array of "
+                                 f"x, y, yaw, v, length, width; got shape {arr.shape}")
+            object.__setattr__(self, "obstacles", Obstacles.from_rows(arr))
+        if not (np.isfinite(self.v_ref) and self.v_ref >= 0):
+            raise ValueError(f"v_ref must be finite and >= 0 [m/s], got {self.v_ref!r}")
+        if not (np.isfinite(self.speed_limit) and self.speed_limit > 0):
+            raise ValueError(f"speed_limit must be finite and > 0 [m/s], got {self.speed_limit!r}")
+        if self.s_hint is not None and not np.isfinite(self.s_hint):
+            raise ValueError(f"s_hint must be finite or None, got {self.s_hint!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class PlanResult:
+    """All samples of one planning call and the choice.
+
+    Attributes:
+        times: (T,) times [s], ``T = n_steps + 1``, ``times[0] = 0`` (current pose).
+        trajectories: (S, T, 4) ``[x, y, yaw, v]`` [m, m, rad, m/s]; yaw is continuous (not
+            wrapped); row 0 is the current pose with the sampled ``v(0)``.
+        omega: (S, T - 1) angular velocity applied during each step [rad/s].
+        frenet: (S, T, 2) ``[s, e]`` of each point on the reference path [m].
+        costs: (S, 3) ``[c_velocity, c_dist, c_obs]`` (see :data:`COST_NAMES`).
+        total: (S,) ``c_total``.
+        feasible: (S,) collision-free mask.
+        chosen: index of the chosen sample.
+        collision_free: whether the chosen sample is collision-free.
+        brake_index: index of the full-brake sample.
+        v_ref: reference speed used [m/s].
+    """
+
+    times: np.ndarray
+    trajectories: np.ndarray
+    omega: np.ndarray
+    frenet: np.ndarray
+    costs: np.ndarray
+    total: np.ndarray
+    feasible: np.ndarray
+    chosen: int
+    collision_free: bool
+    brake_index: int
+    v_ref: float
+
+    @property
+    def trajectory(self) -> np.ndarray:
+        """(T, 4) chosen trajectory ``[x, y, yaw, v]``."""
+        return self.trajectories[self.chosen]
+
+    @property
+    def c_total(self) -> float:
+        """``c_total`` of the chosen sample."""
+        return float(self.total[self.chosen])
+
+    @property
+    def chosen_costs(self) -> np.ndarray:
+        """(3,) cost terms of the chosen sample."""
+        return self.costs[self.chosen]
+
+    @property
+    def n_samples(self) -> int:
+        return len(self.total)
+
+
+# ---------------------------------------------------------------------------- helpers
+def _spread(lo: float, hi: float, n: int) -> np.ndarray:
+    """``n`` offsets spanning ``[lo, hi]``; a single sample is the nominal one (offset 0)."""
+    return np.zeros(1) if n == 1 else np.linspace(lo, hi, n)
+
+
+def _sat_overlap(dx, dy, ce, se, hl_e, hw_e, co, so, hl_o, hw_o):
+    """Separating-axis test of oriented rectangles (all arrays (P,)); True = overlap.
+
+    ``(dx, dy)`` is the centre offset obstacle - ego; ``(ce, se)`` / ``(co, so)`` the cosine
+    and sine of the two headings; ``hl``/``hw`` half length / width [m].
+    """
+    cd = np.abs(ce * co + se * so)  # |cos(psi_e - psi_o)|
+    sd = np.abs(se * co - ce * so)  # |sin(psi_e - psi_o)|
+    sep = np.abs(dx * ce + dy * se) > hl_e + hl_o * cd + hw_o * sd
+    sep |= np.abs(-dx * se + dy * ce) > hw_e + hl_o * sd + hw_o * cd
+    sep |= np.abs(dx * co + dy * so) > hl_o + hl_e * cd + hw_e * sd
+    sep |= np.abs(-dx * so + dy * co) > hw_o + hl_e * sd + hw_e * cd
+    return ~sep
+
+
+def _collisions(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndarray:
+    """(S,) True where a sample's footprint meets an obstacle at any step of ``times``.
+
+    ``X, Y, PSI``: (T, S) ego poses (time-major) at ``times`` (T,). Broad phase 1:
+    obstacle bounding circles against the per-step bounding box of all samples, (K, T);
+    broad phase 2: bounding circles against each sample on the surviving (obstacle, step)
+    pairs; narrow phase: exact separating-axis test.
+    """
+    S = X.shape[1]
+    hit = np.zeros(S, dtype=bool)
+    if len(obs) == 0:
+        return hit
+    hl_e = 0.5 * cfg.length + cfg.safety_margin
+    hw_e = 0.5 * cfg.width + cfg.safety_margin
+    r_e = math.hypot(hl_e, hw_e)
+    ox, oy = obs.predict(times)  # (K, T)
+    reach = (r_e + 0.5 * np.hypot(obs.length, obs.width))[:, None]
+    near = ((ox + reach >= X.min(axis=1)) & (ox - reach <= X.max(axis=1))
+            & (oy + reach >= Y.min(axis=1)) & (oy - reach <= Y.max(axis=1)))
+    ki, ti = np.nonzero(near)
+    if len(ki) == 0:
+        return hit
+    dx = ox[ki, ti][:, None] - np.take(X, ti, axis=0)  # (P, S)
+    dy = oy[ki, ti][:, None] - np.take(Y, ti, axis=0)
+    rr = reach[ki]
+    pi, si = np.nonzero(dx * dx + dy * dy <= rr * rr)
+    if len(si) == 0:
+        return hit
+    ki, ti = ki[pi], ti[pi]
+    psi = PSI[ti, si]
+    yaw_o = obs.yaw[ki]
+    over = _sat_overlap(dx[pi, si], dy[pi, si], np.cos(psi), np.sin(psi), hl_e, hw_e,
+                        np.cos(yaw_o), np.sin(yaw_o), 0.5 * obs.length[ki], 0.5 * obs.width[ki])
+    hit[si[over]] = True
+    return hit
+
+
+#: Obstacle-step pairs whose ``c_obs`` exponent exceeds this for every sample are skipped
+#: (each would add less than ``exp(-10) = 4.5e-5``).
+OBS_EXPONENT_CUTOFF = 10.0
+
+
+def _obstacle_cost(SS, EE, obs: Obstacles, lp: Path, times, cfg: PlannerConfig) -> np.ndarray:
+    """(S,) ``c_obs`` from sample Frenet coordinates ``SS, EE`` (T, S) at ``times`` (T,)."""
+    T, S = SS.shape
+    if len(obs) == 0:
+        return np.zeros(S)
+    so0, eo0, tho, _ = lp.project(np.stack([obs.x, obs.y], axis=1), obs.yaw)
+    so = so0[:, None] + (obs.v * np.cos(tho))[:, None] * times  # (K, T)
+    eo = eo0[:, None] + (obs.v * np.sin(tho))[:, None] * times
+    half_l = (0.5 * (cfg.length + obs.length))[:, None]
+    half_w = (0.5 * (cfg.width + obs.width))[:, None]
+    # lower bound of the exponent over all samples, per (obstacle, step)
+    glon = np.maximum(np.maximum(so - SS.max(axis=1), SS.min(axis=1) - so) - half_l, 0.0)
+    glat = np.maximum(np.maximum(eo - EE.max(axis=1), EE.min(axis=1) - eo) - half_w, 0.0)
+    ki, ti = np.nonzero(glon + cfg.kappa_obs * glat < OBS_EXPONENT_CUTOFF * cfg.sigma_obs)
+    if len(ki) == 0:
+        return np.zeros(S)
+    # (P, S) gaps in float32 (plenty for a penalty, ~2x faster)
+    g = np.abs(np.take(SS, ti, axis=0).astype(np.float32) - so[ki, ti, None].astype(np.float32))
+    g -= half_l[ki].astype(np.float32)
+    np.maximum(g, 0.0, out=g)
+    gl = np.abs(np.take(EE, ti, axis=0).astype(np.float32) - eo[ki, ti, None].astype(np.float32))
+    gl -= half_w[ki].astype(np.float32)
+    np.maximum(gl, 0.0, out=gl)
+    gl *= np.float32(cfg.kappa_obs)
+    g += gl
+    g *= np.float32(-1.0 / cfg.sigma_obs)
+    np.exp(g, out=g)
+    return g.sum(axis=0, dtype=np.float64) / T
+
+
+# ---------------------------------------------------------------------------- planner
+def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResult:
+    """Sample, roll out, score and choose a trajectory (see the module docstring)."""
+    cfg = PlannerConfig() if cfg is None else cfg
+    ego, path = problem.ego, problem.path
+    n, dt = cfg.n_steps, cfg.dt
+    times = np.arange(n + 1) * dt
+    s0, e0, th0, k0 = path.project(ego.xy, ego.yaw, hint_s=problem.s_hint)
+
+    # ---- samples of v(0), omega(0) and the two braking samples
+    v = ego.v
+    v_hi = max(v, problem.speed_limit)
+    v0 = np.clip(v + _spread(-cfg.decel * cfg.v_window_time, cfg.accel * cfg.v_window_time,
+                             cfg.n_v), 0.0, v_hi)
+    lim0 = float(omega_limit(v, cfg.yaw_rate_max, cfg.max_curvature, cfg.lat_accel_max))
+    g0 = min(1.0, cfg.gain_speed / max(abs(v), 1e-9))
+    w_nom = float(np.clip(control_law(v, k0, e0, th0, cfg.k_theta * g0, cfg.k_e * g0 * g0),
+                          -lim0, lim0))
+    w0 = w_nom + _spread(-cfg.omega_spread, cfg.omega_spread, cfg.n_omega)
+    n_grid = cfg.n_v * cfg.n_omega
+    V0 = np.concatenate([np.repeat(v0, cfg.n_omega), [v, v]])
+    W0 = np.concatenate([np.tile(w0, cfg.n_v), [w_nom, w_nom]])
+    v_tgt = np.concatenate([np.full(n_grid, problem.v_ref), [0.0, 0.0]])
+    dec = np.concatenate([np.full(n_grid, cfg.decel), [cfg.decel, cfg.brake_decel]])
+    V = linear_speed_profile(V0, v_tgt, times, cfg.accel, dec)  # (S, T)
+    # normalised distance of each sample from the nominal one (tie-breaking only)
+    dev = (np.abs(W0 - w_nom) / max(cfg.omega_spread, 1e-9)
+           + np.abs(V0 - v) / max((cfg.accel + cfg.decel) * cfg.v_window_time, 1e-9))
+    dev[n_grid:] = (1e6, 2e6)  # braking samples: only when strictly cheapest
+    S = len(V0)
+    lim = omega_limit(V, cfg.yaw_rate_max, cfg.max_curvature, cfg.lat_accel_max)
+    # gain schedule above gain_speed: k_theta ~ 1/|v|, k_e ~ 1/v^2 (same damping ratio)
+    gsc = np.minimum(1.0, cfg.gain_speed / np.maximum(np.abs(V), 1e-9))
+    KTH = (cfg.k_theta * gsc).T
+    KE = (cfg.k_e * gsc * gsc).T
+
+    # ---- local, uniformly resampled reference for fast windowed projection
+    vmax = float(V.max())
+    ds = cfg.path_resolution
+    # covers everything a sample can reach (extended straight past the path's ends)
+    lp = path.resample(ds, s0 - 10.0 - 2 * ds, s0 + vmax * cfg.horizon + 20.0, extrapolate=True)
+
+    # ---- roll-out (loop over time steps only; vectorised over samples; time-major)
+    Z = np.empty((n + 1, S), dtype=complex)
+    PSI = np.empty((n + 1, S)); SS = np.empty((n + 1, S)); EE = np.empty((n + 1, S))
+    W = np.empty((n, S))
+    z = np.full(S, complex(ego.x, ego.y)); psi = np.full(S, ego.yaw)
+    s = np.full(S, s0); e = np.full(S, e0); th = np.full(S, th0); kap = np.full(S, k0)
+    Z[0], PSI[0], SS[0], EE[0] = z, psi, s, e
+    hold = max(1, round(cfg.omega_hold / dt))
+    VT = np.ascontiguousarray(V.T)
+    STEP = VT * dt
+    LIM = np.ascontiguousarray(lim.T)
+    proj = lp.local_projector(2, 2)  # s advances by <= v dt; +-2 segments of slack
+    W_off = W0 - w_nom
+    for k in range(n):
+        w = control_law(VT[k], kap, e, th, KTH[k], KE[k])
+        if k < hold:
+            w = w + W_off
+        lk = LIM[k]
+        w = np.minimum(np.maximum(w, -lk), lk)
+        W[k] = w
+        step = STEP[k]
+        half = w * (0.5 * dt)
+        z = z + step * np.exp(1j * (psi + half))  # midpoint heading (exact chord direction)
+        psi = psi + (half + half)
+        s, e, h, kap = proj(z, s + step)
+        th = wrap_angle(psi - h)
+        Z[k + 1], PSI[k + 1], SS[k + 1], EE[k + 1] = z, psi, s, e
+    X, Y = Z.real, Z.imag  # (T, S) time-major
+
+    # ---- costs
+    t2 = times[1:] ** 2
+    Vf = V[:, 1:]
+    c_vel = (np.abs(problem.v_ref - Vf) @ t2) / t2.sum()
+    c_dist = 1.0 / (1.0 + np.abs(Vf).sum(axis=1))
+    obs = problem.obstacles
+    c_obs = _obstacle_cost(SS[1:], EE[1:], obs, lp, times[1:], cfg)
+    costs = np.stack([c_vel, c_dist, c_obs], axis=1)
+    total = cfg.w_velocity * c_vel + cfg.w_dist * c_dist + cfg.w_obs * c_obs
+
+    # ---- feasibility and choice
+    feasible = ~_collisions(X[1:], Y[1:], PSI[1:], obs, times[1:], cfg)
+    brake_index = S - 1
+    if feasible.any() or cfg.infeasible_fallback == "min_cost":
+        cand = np.where(feasible, total, np.inf) if feasible.any() else total
+        tied = cand <= cand.min() + cfg.tie_tolerance
+        chosen = int(np.argmin(np.where(tied, dev, np.inf)))
+    else:
+        chosen = brake_index
+    return PlanResult(
+        times=times,
+        trajectories=np.stack([X.T, Y.T, PSI.T, V], axis=2),
+        omega=np.ascontiguousarray(W.T),
+        frenet=np.stack([SS.T, EE.T], axis=2),
+        costs=costs,
+        total=total,
+        feasible=feasible,
+        chosen=chosen,
+        collision_free=bool(feasible[chosen]),
+        brake_index=brake_index,
+        v_ref=float(problem.v_ref),
+    )

@@ -1,0 +1,36 @@
+import shutil
+
+import numpy as np
+
+from hbmp_bench.envs import BehaviorEnv
+from hbmp_bench.maps import import_map, net_path
+
+
+def test_imported_map_is_usable_as_a_town(tmp_path, monkeypatch):
+    monkeypatch.setenv("HBMP_BENCH_DATA", str(tmp_path))
+    src = tmp_path / "mine.net.xml"
+    shutil.copy(net_path("Town02"), src)
+    import_map(src, "MyTown")
+    env = BehaviorEnv(town="MyTown", task="OneTurn", episode_index=0)
+    obs, info = env.reset(seed=0)
+    obs, *_ = env.step(0)
+    env.close()
+    assert obs["road"].shape == (10,)
+
+
+def test_vehicle_centric_grid_differs_from_deformed_on_a_turn():
+    grids = {}
+    for kind in ("deformed", "vehicle_centric"):
+        env = BehaviorEnv(town="Town01", task="NavigationDynamic", episode_index=1, observation=kind)
+        obs, _ = env.reset(seed=0)
+        assert env.observation_space.contains(obs)
+        total = np.zeros_like(obs["occupancy"])
+        for _ in range(300):
+            obs, _, terminated, truncated, _ = env.step(0 if obs["road"][9] < 0.6 else 4)
+            total += obs["occupancy"]
+            if terminated or truncated:
+                break
+        env.close()
+        grids[kind] = total
+    assert grids["deformed"].sum() > 0 and grids["vehicle_centric"].sum() > 0
+    assert not np.array_equal(grids["deformed"], grids["vehicle_centric"])

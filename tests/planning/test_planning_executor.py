@@ -1,0 +1,209 @@
+"""Closed-loop behavior execution (executor + tracker + bicycle model, no SUMO)."""
+
+import numpy as np
+import pytest
+
+from hbmp_bench.planning import (Behavior, BehaviorExecutor, ExecutorConfig, Obstacles, Path,
+                                 PlannerConfig, ReferencePaths, VehicleState, reward_from_cost,
+                                 simulate_behavior, step)
+from hbmp_bench.planning.planner import _sat_overlap
+
+LANE = 3.5
+XS = np.linspace(-100.0, 900.0, 201)
+
+
+def lane(y):
+    return Path(np.stack([XS, np.full_like(XS, y)], axis=1))
+
+
+STRAIGHT = ReferencePaths(lane(LANE), lane(0.0), lane(-LANE))
+
+
+def curved_refs(R=60.0):
+    """Straight 50 m, left arc of radius R (+ offset lanes), straight again."""
+    def shape(off):
+        r = R - off  # the left lane (off > 0) is on the inside
+        a = np.linspace(-np.pi / 2, 0.0, 60)
+        straight1 = np.stack([np.linspace(-50, 0, 26), np.full(26, off)], axis=1)
+        arc = np.stack([r * np.cos(a), R + r * np.sin(a)], axis=1)
+        straight2 = np.stack([np.full(40, r), np.linspace(R, R + 200, 40)], axis=1)
+        return Path.concat([straight1, arc, straight2])
+    return ReferencePaths(shape(LANE), shape(0.0), shape(-LANE))
+
+
+def errors(path, s: VehicleState):
+    _, e, th, _ = path.project(s.xy, s.yaw)
+    return e, th
+
+
+@pytest.mark.parametrize("v", [5.0, 10.0])
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_converges_to_the_lane_on_a_straight(v, sign):
+    ex = BehaviorExecutor()
+    ego = VehicleState(0.0, 2.0 * sign, 0.3 * sign, v)
+    r = simulate_behavior(ex, Behavior.KEEP, ego, STRAIGHT, 20.0)
+    e, th = errors(STRAIGHT.current, r.final)
+    assert r.outcome.reason == "converged"
+    assert abs(e) < 0.3 and abs(th) < 0.05
+    assert r.outcome.duration < 8.0 and r.outcome.collision_free
+
+
+@pytest.mark.parametrize("v", [6.0, 10.0])
+def test_converges_to_the_lane_on_a_curve(v):
+    refs = curved_refs()
+    # start on the arc, 2 m outside the lane and heading 0.3 rad away from it
+    a = -np.pi / 2 + 0.3
+    R = 62.0
+    ego = VehicleState(R * np.cos(a), 60.0 + R * np.sin(a), a + np.pi / 2 - 0.3, v)
+    e0, th0 = errors(refs.current, ego)
+    assert e0 == pytest.approx(-2.0, abs=0.01) and th0 == pytest.approx(-0.3, abs=0.01)
+    ex = BehaviorExecutor()
+    r = simulate_behavior(ex, Behavior.KEEP, ego, refs, 20.0)
+    e, th = errors(refs.current, r.final)
+    assert r.outcome.reason == "converged", (e, th)
+    assert abs(e) < 0.3 and abs(th) < 0.05
+    # and it keeps tracking the curve afterwards
+    for _ in range(3):
+        r = simulate_behavior(ex, Behavior.KEEP, r.final, refs, 20.0)
+        e, th = errors(refs.current, r.final)
+        assert abs(e) < 0.3 and abs(th) < 0.05
+
+
+@pytest.mark.parametrize("v", [5.0, 10.0, 15.0, 25.0])
+def test_lane_change_left_completes(v):
+    ex = BehaviorExecutor()
+    r = simulate_behavior(ex, Behavior.CHANGE_LEFT, VehicleState(0.0, 0.0, 0.0, v), STRAIGHT, 30.0)
+    assert r.outcome.behavior == Behavior.CHANGE_LEFT
+    assert r.outcome.reason == "converged" and r.outcome.duration < ExecutorConfig().max_duration
+    assert abs(r.final.y - LANE) < 0.3
+    assert r.states[:, 1].max() < LANE + 0.5  # little overshoot
+    assert r.final.v == pytest.approx(v, abs=0.5)
+
+
+def test_lane_change_on_a_curve_and_to_the_right():
+    refs = curved_refs()
+    ex = BehaviorExecutor()
+    r = simulate_behavior(ex, Behavior.CHANGE_RIGHT, VehicleState(-20.0, 0.0, 0.0, 10.0), refs, 20.0)
+    assert r.outcome.reason == "converged"
+    e, th = errors(refs.right, r.final)
+    assert abs(e) < 0.3 and abs(th) < 0.05
+
+
+def test_missing_lane_becomes_keep():
+    refs = ReferencePaths(None, STRAIGHT.current, None)
+    ex = BehaviorExecutor()
+    for b in (Behavior.CHANGE_LEFT, Behavior.CHANGE_RIGHT):
+        r = simulate_behavior(ex, b, VehicleState(0.0, 0.0, 0.0, 10.0), refs, 20.0)
+        assert r.outcome.requested == b and r.outcome.behavior == Behavior.KEEP
+        assert abs(r.final.y) < 1e-6
+
+
+def test_speed_up_tracks_the_new_reference():
+    ex = BehaviorExecutor()
+    r = simulate_behavior(ex, Behavior.SPEED_UP, VehicleState(0.0, 0.0, 0.0, 5.0), STRAIGHT, 20.0)
+    assert r.outcome.v_ref == pytest.approx(7.0)  # 5 + max(20 %, 2 m/s)
+    assert r.outcome.reason == "converged"
+    assert abs(r.final.v - 7.0) < 0.5
+    # keeps holding it afterwards (a keep at the new speed)
+    r2 = simulate_behavior(ex, Behavior.KEEP, r.final, STRAIGHT, 20.0)
+    assert r2.final.v == pytest.approx(r.final.v, abs=0.3)
+
+
+def test_speed_down_and_speed_limit():
+    ex = BehaviorExecutor()
+    r = simulate_behavior(ex, Behavior.SPEED_DOWN, VehicleState(0.0, 0.0, 0.0, 12.0), STRAIGHT, 20.0)
+    assert r.outcome.v_ref == pytest.approx(9.6)
+    assert r.outcome.reason == "converged" and abs(r.final.v - 9.6) < 0.5
+    r = simulate_behavior(ex, Behavior.SPEED_UP, VehicleState(0.0, 0.0, 0.0, 12.0), STRAIGHT, 13.0)
+    assert r.outcome.v_ref == pytest.approx(13.0)
+
+
+def test_keep_lasts_the_minimum_duration():
+    ex = BehaviorExecutor()
+    r = simulate_behavior(ex, Behavior.KEEP, VehicleState(0.0, 0.0, 0.0, 10.0), STRAIGHT, 20.0)
+    assert r.outcome.reason == "converged"
+    assert r.outcome.duration == pytest.approx(1.0)
+    assert r.outcome.n_steps == 10 and len(r.states) == 11
+
+
+def test_timeout_at_max_duration():
+    ex = BehaviorExecutor(config=ExecutorConfig(max_duration=3.0))
+    # standing still 2 m off the lane: keep (v_ref = 0) can never converge
+    r = simulate_behavior(ex, Behavior.KEEP, VehicleState(0.0, 2.0, 0.0, 0.0), STRAIGHT, 20.0)
+    assert r.outcome.reason == "timeout" and r.outcome.duration == pytest.approx(3.0)
+    assert r.final.v == 0.0
+
+
+def test_cost_and_reward_bookkeeping():
+    ex = BehaviorExecutor()
+    ego = VehicleState(0.0, 0.0, 0.0, 10.0)
+    ex.start(Behavior.CHANGE_LEFT, ego, STRAIGHT, 20.0)
+    totals = []
+    while True:
+        control, p = ex.step(ego, None)
+        if ex.done:
+            break
+        totals.append(p.c_total)
+        ego = step(ego, control, 0.1)
+    assert ex.c_total == pytest.approx(np.mean(totals))
+    assert ex.reward() == pytest.approx(-ex.c_total)
+    assert ex.reward(scale=2.0) == pytest.approx(-2.0 * ex.c_total)
+    out = ex.outcome()
+    assert out.c_total == pytest.approx(ex.c_total) and len(out.c_terms) == 3
+    assert out.n_steps == len(totals)
+    # stepping after done still returns a control and does not change the cost
+    ex.step(ego, None)
+    assert ex.c_total == pytest.approx(np.mean(totals)) and ex.done
+
+
+def test_reward_from_cost():
+    assert reward_from_cost(0.5) == pytest.approx(-0.5)
+    assert reward_from_cost(0.5, scale=10.0) == pytest.approx(-5.0)
+    np.testing.assert_allclose(reward_from_cost(np.array([0.0, 1.0, 2.0]), 2.0), [0.0, -2.0, -4.0])
+    with pytest.raises(ValueError):
+        reward_from_cost(1.0, scale=0.0)
+
+
+def test_executor_errors():
+    ex = BehaviorExecutor()
+    with pytest.raises(RuntimeError):
+        ex.step(VehicleState(0, 0, 0, 1))
+    with pytest.raises(ValueError):
+        ex.start(Behavior.KEEP, VehicleState(0, 0, 0, 1), (None, None, None), 10.0)
+    with pytest.raises(ValueError):
+        ex.start(Behavior.KEEP, VehicleState(0, 0, 0, 1), STRAIGHT, 0.0)
+    with pytest.raises(ValueError):
+        ExecutorConfig(min_duration=10.0, max_duration=8.0)
+    with pytest.raises(ValueError):
+        ExecutorConfig(replan_every=0)
+
+
+def _overlap(ego: VehicleState, obs: Obstacles, cfg=PlannerConfig()):
+    c, s = np.cos(ego.yaw), np.sin(ego.yaw)
+    return _sat_overlap(obs.x - ego.x, obs.y - ego.y, c, s, cfg.length / 2, cfg.width / 2,
+                        np.cos(obs.yaw), np.sin(obs.yaw), obs.length / 2, obs.width / 2).any()
+
+
+def test_repeated_keep_stops_behind_a_stopped_car():
+    ex = BehaviorExecutor()
+    ego = VehicleState(0.0, 0.0, 0.0, 10.0)
+    obs = Obstacles.from_rows([(60.0, 0.0, 0.0, 0.0, 4.6, 1.9)])
+    for _ in range(15):  # ~1 Hz decisions, always keep
+        r = simulate_behavior(ex, Behavior.KEEP, ego, STRAIGHT, 20.0, obs)
+        ego = r.final
+        for x, y, yaw, v, _ in r.states:
+            assert not _overlap(VehicleState(x, y, yaw, v), obs)
+    assert ego.v < 0.5 and 60.0 - ego.x > 4.6
+
+
+def test_change_left_passes_a_slow_car_without_collision():
+    ex = BehaviorExecutor()
+    ego = VehicleState(0.0, 0.0, 0.0, 10.0)
+    obs = Obstacles.from_rows([(20.0, 0.0, 0.0, 4.0, 4.6, 1.9)])
+    r = simulate_behavior(ex, Behavior.CHANGE_LEFT, ego, STRAIGHT, 20.0, obs)
+    assert r.outcome.reason == "converged" and r.outcome.collision_free
+    assert abs(r.final.y - LANE) < 0.3
+    # cost of the executed lane change is lower than keeping behind the slow car
+    ex2 = BehaviorExecutor()
+    r2 = simulate_behavior(ex2, Behavior.KEEP, ego, STRAIGHT, 20.0, obs)
+    assert r2.outcome.c_total > r.outcome.c_total

@@ -1,0 +1,284 @@
+"""Sampling planner: shapes, cost terms against the paper's formulas, obstacles, timing."""
+
+import time
+
+import numpy as np
+import pytest
+
+from hbmp_bench.planning import (Obstacles, Path, PlannerConfig, PlanningProblem, VehicleState,
+                                 plan)
+from hbmp_bench.planning.planner import _sat_overlap
+
+LANE = 3.5
+XS = np.linspace(-100.0, 500.0, 121)
+
+
+def lane(y):
+    return Path(np.stack([XS, np.full_like(XS, y)], axis=1))
+
+
+CURRENT, LEFT, RIGHT = lane(0.0), lane(LANE), lane(-LANE)
+
+
+def car(x, y=0.0, v=0.0, yaw=0.0, length=4.6, width=1.9):
+    return (x, y, yaw, v, length, width)
+
+
+def obstacles(*rows):
+    return Obstacles.from_rows(rows)
+
+
+def problem(path=CURRENT, ego=None, v_ref=10.0, obs=(), limit=20.0):
+    ego = VehicleState(0.0, 0.0, 0.0, 10.0) if ego is None else ego
+    return PlanningProblem(ego, path, v_ref, limit, obstacles(*obs) if obs else Obstacles.empty())
+
+
+# ---------------------------------------------------------------------------- structure
+def test_result_shapes_and_start_state():
+    cfg = PlannerConfig()
+    r = plan(problem(ego=VehicleState(1.0, 2.0, 0.3, 10.0)), cfg)
+    S, T = cfg.n_samples, cfg.n_steps + 1
+    assert (S, T) == (65, 31)
+    assert r.trajectories.shape == (S, T, 4)
+    assert r.costs.shape == (S, 3) and r.total.shape == (S,) and r.feasible.shape == (S,)
+    assert r.omega.shape == (S, T - 1) and r.frenet.shape == (S, T, 2)
+    np.testing.assert_allclose(r.times, np.arange(T) * 0.1)
+    np.testing.assert_allclose(r.trajectories[:, 0, :3], np.tile([1.0, 2.0, 0.3], (S, 1)))
+    assert r.trajectory is r.trajectories[r.chosen] or np.array_equal(r.trajectory, r.trajectories[r.chosen])
+    assert r.c_total == pytest.approx(r.total[r.chosen])
+    np.testing.assert_allclose(r.total, r.costs @ [cfg.w_velocity, cfg.w_dist, cfg.w_obs])
+    assert r.brake_index == S - 1 and r.collision_free and r.feasible.all()
+
+
+def test_unicycle_rollout_consistency():
+    r = plan(problem(ego=VehicleState(0.0, 2.0, 0.3, 10.0)))
+    tr, w, dt = r.trajectories, r.omega, 0.1
+    # x_{k+1} = x_k + v_k cos(psi_k + omega_k dt / 2) dt ; psi_{k+1} = psi_k + omega_k dt
+    mid = tr[:, :-1, 2] + 0.5 * w * dt
+    np.testing.assert_allclose(tr[:, 1:, 0], tr[:, :-1, 0] + tr[:, :-1, 3] * np.cos(mid) * dt)
+    np.testing.assert_allclose(tr[:, 1:, 1], tr[:, :-1, 1] + tr[:, :-1, 3] * np.sin(mid) * dt)
+    np.testing.assert_allclose(tr[:, 1:, 2], tr[:, :-1, 2] + w * dt)
+    cfg = PlannerConfig()
+    lim = np.minimum(np.minimum(cfg.yaw_rate_max, cfg.max_curvature * tr[:, :-1, 3]),
+                     cfg.lat_accel_max / np.maximum(tr[:, :-1, 3], 1e-6))
+    assert np.all(np.abs(w) <= lim + 1e-12)
+
+
+def test_all_samples_converge_to_the_reference_lane():
+    r = plan(problem(ego=VehicleState(0.0, 2.0, 0.3, 10.0)))
+    e = r.frenet[:, :, 1]
+    grid = slice(0, r.brake_index - 1)
+    assert np.all(np.abs(e[grid, -1]) < 1.0)      # from 2 m (and heading away) to < 1 m in 3 s
+    assert np.all(np.abs(e[grid, -1]) < np.abs(e[grid, 0]))
+    # Frenet coordinates agree with a fresh projection
+    xy = r.trajectories[:, :, :2].reshape(-1, 2)
+    s, ee = CURRENT.frenet(xy)
+    np.testing.assert_allclose(ee, e.ravel(), atol=1e-9)
+
+
+def test_lane_change_samples_reach_the_left_lane():
+    r = plan(problem(path=LEFT))
+    assert r.trajectory[-1, 1] > 2.5 and r.frenet[r.chosen, -1, 1] > -1.0
+
+
+# ---------------------------------------------------------------------------- cost terms
+def test_c_velocity_matches_the_formula():
+    cfg = PlannerConfig(v_window_time=0.0, accel=2.0)
+    r = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 5.0), v_ref=7.0), cfg)
+    num = den = 0.0
+    for k in range(1, 31):  # hand computation of sum t^2 |v_ref - v(t)| / sum t^2
+        t = 0.1 * k
+        v = min(5.0 + 2.0 * t, 7.0)
+        num += t * t * abs(7.0 - v)
+        den += t * t
+    n_grid = cfg.n_v * cfg.n_omega
+    np.testing.assert_allclose(r.costs[:n_grid, 0], num / den, rtol=1e-12)
+    np.testing.assert_allclose(r.trajectories[0, :11, 3], 5.0 + 2.0 * np.arange(11) * 0.1)
+    # every sample: recompute from its own speed column
+    t = r.times[1:]
+    v = r.trajectories[:, 1:, 3]
+    np.testing.assert_allclose(r.costs[:, 0], (t**2 * np.abs(7.0 - v)).sum(1) / (t**2).sum())
+
+
+def test_c_dist_matches_the_formula():
+    cfg = PlannerConfig(v_window_time=0.0)
+    r = plan(problem(v_ref=10.0), cfg)
+    n_grid = cfg.n_v * cfg.n_omega
+    np.testing.assert_allclose(r.costs[:n_grid, 1], 1.0 / (1.0 + 30 * 10.0))
+    v = r.trajectories[:, 1:, 3]
+    np.testing.assert_allclose(r.costs[:, 1], 1.0 / (1.0 + np.abs(v).sum(1)))
+    assert r.costs[r.brake_index, 1] > r.costs[0, 1]  # braking travels less
+
+
+def test_c_velocity_prefers_reaching_v_ref():
+    r = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 5.0), v_ref=7.0))
+    v0 = r.trajectories[:, 0, 3]
+    assert v0[r.chosen] == pytest.approx(v0[: r.brake_index - 1].max())
+    assert r.costs[r.brake_index, 0] > r.costs[r.chosen, 0]
+
+
+def test_c_obs_zero_without_obstacles_and_small_for_far_lanes():
+    assert np.all(plan(problem()).costs[:, 2] == 0.0)
+    r = plan(problem(obs=[car(15.0, y=2 * LANE + 1.0)]))  # two lanes away
+    assert r.costs[:, 2].max() < 1e-3
+
+
+def test_c_obs_grows_as_the_obstacle_gets_closer():
+    chosen, lowest = [], []
+    for gap in [80.0, 60.0, 45.0, 35.0]:
+        r = plan(problem(obs=[car(gap, v=8.0)]))
+        assert r.collision_free
+        chosen.append(r.costs[r.chosen, 2])
+        lowest.append(r.costs[:, 2].min())
+    assert np.all(np.diff(chosen) > 0) and np.all(np.diff(lowest) > 0)
+    # and closer laterally
+    lat = [plan(problem(obs=[car(30.0, y=y, v=10.0)])).costs[0, 2] for y in (6.0, 4.5, 3.5, 2.5)]
+    assert np.all(np.diff(lat) > 0)
+
+
+def test_c_obs_hand_computed_single_obstacle():
+    cfg = PlannerConfig(n_v=1, n_omega=1)
+    # obstacle driving with the ego at the same speed, 30 m ahead, same lane
+    r = plan(problem(obs=[car(30.0, v=10.0, length=4.0, width=2.0)]), cfg)
+    g_lon = 30.0 - 0.5 * (cfg.length + 4.0)
+    expected = np.exp(-g_lon / cfg.sigma_obs)  # g_lat = 0 at every step
+    assert r.costs[0, 2] == pytest.approx(expected, rel=1e-5)
+    # 1 m of lateral gap costs exp(-kappa_obs * 1 / sigma)
+    y = 0.5 * (cfg.width + 2.0) + 1.0
+    r = plan(problem(obs=[car(30.0, y=y, v=10.0, length=4.0, width=2.0)]), cfg)
+    assert r.costs[0, 2] == pytest.approx(expected * np.exp(-cfg.kappa_obs / cfg.sigma_obs), rel=1e-4)
+
+
+# ---------------------------------------------------------------------------- collisions
+def _brute_overlap(a, b, n=60):
+    """Dense-sampling overlap of two rectangles (cx, cy, yaw, length, width)."""
+    def pts(r):
+        u, v = np.meshgrid(np.linspace(-0.5, 0.5, n), np.linspace(-0.5, 0.5, n))
+        lx, ly = u.ravel() * r[3], v.ravel() * r[4]
+        c, s = np.cos(r[2]), np.sin(r[2])
+        return np.stack([r[0] + c * lx - s * ly, r[1] + s * lx + c * ly], 1)
+
+    def inside(p, r):
+        c, s = np.cos(r[2]), np.sin(r[2])
+        d = p - r[:2]
+        return (np.abs(d @ [c, s]) <= r[3] / 2) & (np.abs(d @ [-s, c]) <= r[4] / 2)
+
+    return bool(inside(pts(a), b).any() or inside(pts(b), a).any())
+
+
+def test_separating_axis_against_brute_force():
+    rng = np.random.default_rng(3)
+    checked = 0
+    for _ in range(400):
+        a = np.array([0.0, 0.0, rng.uniform(-np.pi, np.pi), rng.uniform(2, 5), rng.uniform(1, 2.5)])
+        b = np.array([*rng.uniform(-5, 5, 2), rng.uniform(-np.pi, np.pi), rng.uniform(2, 5), rng.uniform(1, 2.5)])
+        grow, shrink = b.copy(), b.copy()
+        grow[3:] *= 1.03
+        shrink[3:] *= 0.97
+        truth = _brute_overlap(a, b)
+        if truth != _brute_overlap(a, grow) or truth != _brute_overlap(a, shrink):
+            continue  # too close to touching for the sampled reference
+        got = _sat_overlap(np.array([b[0]]), np.array([b[1]]), np.cos(a[2]), np.sin(a[2]), a[3] / 2,
+                           a[4] / 2, np.cos(b[2]), np.sin(b[2]), b[3] / 2, b[4] / 2)[0]
+        assert got == truth
+        checked += 1
+    assert checked > 300
+
+
+def test_adjacent_lane_traffic_is_feasible():
+    r = plan(problem(obs=[car(0.0, y=LANE, v=10.0), car(10.0, y=-LANE, v=10.0)]))
+    assert r.feasible[: r.brake_index - 1].all() and r.collision_free
+
+
+def test_blocked_lane_slows_down():
+    r = plan(problem(obs=[car(25.0)]))  # stopped car 25 m ahead at 10 m/s
+    n_grid = r.brake_index - 1
+    assert not r.feasible[:n_grid].any()  # keeping 10 m/s hits it within 3 s
+    assert r.collision_free and r.chosen in (r.brake_index - 1, r.brake_index)
+    v = r.trajectory[:, 3]
+    assert v[-1] <= 1.0 + 1e-9 and np.all(np.diff(v) <= 1e-12)  # 10 m/s at >= 3 m/s^2 for 3 s
+
+
+def test_unavoidable_obstacle_is_flagged():
+    p = problem(obs=[car(8.0)])  # 3 m gap at 10 m/s: even the full brake hits it
+    r = plan(p)
+    assert not r.feasible.any() and not r.collision_free
+    assert r.chosen == int(np.argmin(r.total)) or r.total[r.chosen] <= r.total.min() + 1e-3
+    rb = plan(p, PlannerConfig(infeasible_fallback="brake"))
+    assert rb.chosen == rb.brake_index and not rb.collision_free
+    assert rb.trajectory[-1, 3] == 0.0
+
+
+def test_obstacle_ahead_makes_keep_costlier_than_change_left():
+    obs = [car(25.0, v=5.0)]  # slower car 25 m ahead in the current lane
+    costs = {name: plan(problem(path=p, obs=obs)).c_total
+             for name, p in [("left", LEFT), ("keep", CURRENT), ("right", RIGHT)]}
+    assert costs["keep"] > costs["left"]
+    assert costs["keep"] > costs["right"]
+    # a car alongside in the left lane turns it around
+    obs2 = obs + [car(3.0, y=LANE, v=10.0)]
+    r_left = plan(problem(path=LEFT, obs=obs2))
+    r_keep = plan(problem(path=CURRENT, obs=obs2))
+    assert r_left.c_total > r_keep.c_total or not r_left.collision_free
+
+
+def test_curved_reference():
+    R = 40.0
+    a = np.linspace(-np.pi / 2, np.pi / 2, 181)
+    path = Path(np.stack([R * np.cos(a), R + R * np.sin(a)], axis=1))  # left turn, starts at (0, 0)
+    r = plan(PlanningProblem(VehicleState(0.0, 0.0, 0.0, 8.0), path, 8.0, 15.0))
+    e = r.frenet[r.chosen, :, 1]
+    assert np.all(np.abs(e) < 0.05)  # stays on the arc
+    np.testing.assert_allclose(r.omega[r.chosen, 10:], 8.0 / R, rtol=0.03)
+
+
+# ---------------------------------------------------------------------------- config
+@pytest.mark.parametrize("kw", [dict(horizon=0.25), dict(dt=0.0), dict(n_v=0), dict(n_omega=2.5),
+                                dict(w_obs=-1.0), dict(k_e=0.0), dict(accel=float("nan")),
+                                dict(infeasible_fallback="stop"), dict(lat_accel_max=0.0),
+                                dict(length=-1.0)])
+def test_config_validation(kw):
+    with pytest.raises(ValueError):
+        PlannerConfig(**kw)
+
+
+def test_problem_validation():
+    ego = VehicleState(0.0, 0.0, 0.0, 1.0)
+    with pytest.raises(ValueError):
+        PlanningProblem(ego, CURRENT, -1.0, 10.0)
+    with pytest.raises(ValueError):
+        PlanningProblem(ego, CURRENT, 1.0, 0.0)
+    with pytest.raises(ValueError):
+        PlanningProblem(ego, XS, 1.0, 10.0)
+    with pytest.raises(ValueError):
+        Obstacles(x=[0.0], y=[0.0, 1.0], yaw=[0.0], v=[0.0], length=[1.0], width=[1.0])
+    with pytest.raises(ValueError):
+        VehicleState(0.0, 0.0, 0.0, -1.0)
+
+
+# ---------------------------------------------------------------------------- timing
+def test_plan_latency_is_reported(capsys):
+    rng = np.random.default_rng(0)
+    K = 20
+    obs = Obstacles(rng.uniform(-20, 80, K), rng.choice([-LANE, 0.0, LANE], K), np.zeros(K),
+                    rng.uniform(5, 12, K), np.full(K, 4.6), np.full(K, 1.9))
+    p = PlanningProblem(VehicleState(0.0, 0.3, 0.05, 10.0), CURRENT, 10.0, 14.0, obs)
+    cfg = PlannerConfig()
+    plan(p, cfg)
+    best = np.inf
+    for _ in range(5):
+        t0 = time.perf_counter()
+        for _ in range(20):
+            plan(p, cfg)
+        best = min(best, (time.perf_counter() - t0) / 20)
+    with capsys.disabled():
+        print(f"\nplan(): {cfg.n_samples} samples x {cfg.n_steps} steps x {K} obstacles: "
+              f"{best * 1e3:.2f} ms per call (best of 5 x 20)")
+
+
+def test_short_path_is_extended_straight():
+    short = Path([[0.0, 1.0], [20.0, 1.0]])
+    r = plan(PlanningProblem(VehicleState(15.0, 0.0, 0.0, 10.0), short, 10.0, 20.0))
+    assert r.trajectory[-1, 0] > 40.0  # well past the end of the path
+    assert abs(r.trajectory[-1, 1] - 1.0) < 0.3  # converged onto the extended centerline
+    np.testing.assert_allclose(r.frenet[r.chosen, -1, 0], r.trajectory[-1, 0], atol=0.05)
