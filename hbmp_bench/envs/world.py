@@ -339,9 +339,5 @@ class DrivingWorld:
 def _accumulate(total: StepEvents, ev: StepEvents) -> None:
     for f in dataclasses.fields(StepEvents):
         value = getattr(ev, f.name)
-        if isinstance(value, bool):
-            setattr(total, f.name, getattr(total, f.name) or value)
-        elif isinstance(value, int):
-            setattr(total, f.name, getattr(total, f.name) + value)
-        else:
-            setattr(total, f.name, getattr(total, f.name) + value)
+        merged = (getattr(total, f.name) or value) if isinstance(value, bool) else getattr(total, f.name) + value
+        setattr(total, f.name, merged)
