@@ -18,6 +18,7 @@ from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents
 from hbmp_bench.metrics.geometry import LaneLocator
 from hbmp_bench.metrics.records import EpisodeRecord, driving_score
+from hbmp_bench.planning.behaviors import BehaviorConfig, reference_speed
 from hbmp_bench.scenarios import Episode, road_network
 from hbmp_bench.sim.sumo import EGO_TYPE, SumoSim
 
@@ -45,8 +46,7 @@ class WorldConfig:
         fidelity: ``event`` (the paper's SUMO stage: a behavior completes within one decision
             through SUMO's lane-change and speed commands).
         decision_period_s: simulated time per decision in event fidelity [s] (paper: 10 Hz).
-        speed_step_fraction / min_speed_step_mps: speed_up / speed_down change the reference
-            speed by this fraction of the current speed, at least by the minimum step [m/s].
+        behavior: the v_ref rule of speed_up / speed_down, shared with the motion planner.
         observation: M_t grid options.
         background_route_m: length of the chained route each background vehicle gets, long
             enough that it circulates for the whole episode [m].
@@ -54,9 +54,8 @@ class WorldConfig:
 
     fidelity: str = "event"
     decision_period_s: float = 0.1
-    speed_step_fraction: float = 0.2
-    min_speed_step_mps: float = 2.0
     observation: ObservationConfig = field(default_factory=ObservationConfig)
+    behavior: BehaviorConfig = field(default_factory=BehaviorConfig)
     background_route_m: float = 4000.0
     step_length_s: float = 0.1
 
@@ -65,23 +64,10 @@ class WorldConfig:
             raise ValueError(f"fidelity must be one of ('event',), got {self.fidelity!r}")
         if self.decision_period_s < self.step_length_s - 1e-9:
             raise ValueError("decision_period_s must be >= step_length_s")
-        if not 0 < self.speed_step_fraction < 1 or self.min_speed_step_mps <= 0:
-            raise ValueError("speed steps must be positive (fraction in (0, 1))")
 
     @property
     def steps_per_decision(self) -> int:
         return max(1, int(round(self.decision_period_s / self.step_length_s)))
-
-
-def reference_speed(behavior: int, speed: float, limit: float, fraction: float, min_step: float) -> float:
-    """v_ref of a behavior: speed_up / speed_down change the current speed by ``fraction`` of it
-    (at least ``min_step`` [m/s]), capped to [0, limit]; the other behaviors keep the current speed."""
-    step = max(fraction * speed, min_step)
-    if behavior == SPEED_UP:
-        return min(limit, speed + step)
-    if behavior == SPEED_DOWN:
-        return max(0.0, speed - step)
-    return min(speed, limit) if behavior == KEEP else speed
 
 
 class DrivingWorld:
@@ -209,7 +195,7 @@ class DrivingWorld:
         ego = self._ego
         limit = self.net.lane(ego.lane).speed
         cfg = self.config
-        self.sim.set_speed(EGO_ID, reference_speed(executed, ego.speed, limit, cfg.speed_step_fraction, cfg.min_speed_step_mps))
+        self.sim.set_speed(EGO_ID, reference_speed(executed, ego.speed, limit, cfg.behavior))
         if executed in (CHANGE_LEFT, CHANGE_RIGHT):
             side = +1 if executed == CHANGE_LEFT else -1
             self.sim.change_lane(EGO_ID, self.net.lane(self.net.neighbour_lane(ego.lane, side)).index)
