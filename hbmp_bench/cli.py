@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 
 from hbmp_bench.errors import UnknownNameError
+
+COMMAND_MODULES: tuple[str, ...] = ()
+"""Modules that add their own sub-commands: each has ``add_commands(subparsers)``, whose parsers
+set ``func`` (``args -> exit code``). Keeps each room's commands beside its code."""
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
@@ -154,6 +159,9 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("file")
     q.add_argument("--name", required=True)
     p.set_defaults(func=_cmd_maps)
+
+    for module_name in COMMAND_MODULES:
+        importlib.import_module(module_name).add_commands(sub)
     return parser
 
 
