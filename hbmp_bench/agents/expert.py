@@ -28,17 +28,22 @@ class ExpertAgent:
 
     Args:
         cruise_fraction: cruise speed as a fraction of the speed limit.
-        comfort_decel: deceleration it plans stops with [m/s²] (the ego brakes at up to 4.5).
+        comfort_decel: deceleration it plans stops with when it decides every 0.1 s [m/s²].
+        behavior_decel: deceleration it plans stops with when behaviors last ~1 s (motion
+            planner): what a chain of speed_down behaviors achieves (v_ref steps of
+            max(20 %, 2 m/s) per ~1 s behavior) [m/s²].
         stop_margin_m: distance kept to a stop line or an obstacle [m].
         grid: the M_t grid it reads (must match the environment's).
     """
 
     name = "expert"
 
-    def __init__(self, cruise_fraction: float = 0.9, comfort_decel: float = 3.0, stop_margin_m: float = 5.0,
-                 grid: ObservationConfig | None = None):
+    def __init__(self, cruise_fraction: float = 0.9, comfort_decel: float = 3.0, behavior_decel: float = 1.8,
+                 stop_margin_m: float = 5.0, grid: ObservationConfig | None = None):
         self.cruise_fraction = cruise_fraction
         self.comfort_decel = comfort_decel
+        self.behavior_decel = behavior_decel
+        self._decel = comfort_decel
         self.stop_margin_m = stop_margin_m
         self.grid = grid or ObservationConfig()
         self._stuck_s = 0.0
@@ -72,7 +77,7 @@ class ExpertAgent:
         return not self._corridor(occupancy, side)[window].any()
 
     def _stop_speed(self, distance_m: float) -> float:
-        return float(np.sqrt(2.0 * self.comfort_decel * max(distance_m - self.stop_margin_m, 0.0)))
+        return float(np.sqrt(2.0 * self._decel * max(distance_m - self.stop_margin_m, 0.0)))
 
     # ---------------------------------------------------------------- act
     def act(self, observation, info):
@@ -80,17 +85,22 @@ class ExpertAgent:
         road = observation["road"]
         v, limit = scene["speed_mps"], scene["speed_limit_mps"]
         target = self.cruise_fraction * limit
+        # a behavior runs ~ as long as the last one did (0.1 s in event fidelity, ~1 s with the
+        # motion planner): judge distances from where the ego will be when it can act again
+        period = float(np.clip(info.get("duration_s", 0.1), 0.1, 1.5))
+        travel = v * period
+        self._decel = self.comfort_decel if period <= 0.2 else min(self.comfort_decel, self.behavior_decel)
 
         gap = self._gap_ahead(self._corridor(occ, 0))
-        target = min(target, self._stop_speed(gap))
+        target = min(target, self._stop_speed(gap - travel))
         light, d_stop = scene["light"], scene["stop_distance_m"]
-        must_stop = light in ("r", "R", "u") or (light in ("y", "Y") and v * v / (2 * 4.5) < d_stop - 1.0)
+        must_stop = light in ("r", "R", "u") or (light in ("y", "Y") and v * v / (2 * 4.5) < d_stop - 1.0 - travel)
         if must_stop:
-            target = min(target, self._stop_speed(d_stop + self.stop_margin_m - 1.0))
+            target = min(target, self._stop_speed(d_stop - travel + self.stop_margin_m - 1.0))
         if not scene["in_junction"] and road[3] < 0.5 and d_stop < 30.0:
-            target = min(target, self._stop_speed(d_stop + self.stop_margin_m - 1.0))
+            target = min(target, self._stop_speed(d_stop - travel + self.stop_margin_m - 1.0))
 
-        self._stuck_s = self._stuck_s + 0.1 if (v < 0.5 and gap < 15.0 and not must_stop) else 0.0
+        self._stuck_s = self._stuck_s + period if (v < 0.5 and gap < 15.0 and not must_stop) else 0.0
         if not scene["in_junction"]:
             offset = scene["route_lane_offset"]
             if offset != 0:

@@ -28,6 +28,7 @@ import numpy as np
 
 from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.planning.frame import Path
+from hbmp_bench.planning.frame import round_corners as smooth_polyline
 
 ROAD_FEATURES = ("e_l", "e_r", "a_l", "a_c", "a_r", "l_g", "l_y", "l_r", "d_s", "dv")
 GREEN, YELLOW, RED = "gGoOs", "yY", "rRu"
@@ -80,6 +81,34 @@ def _sample_boxes(xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np
     return np.stack([xy[:, 0:1] + c * lon - s * lat, xy[:, 1:2] + s * lon + c * lat], axis=-1).reshape(-1, 2)
 
 
+def followed_path(net: RoadNetwork, lane_id: str, next_edges: tuple[str, ...], back_m: float, ahead_m: float,
+                  max_spacing: float | None = None, round_corners: int = 0) -> Path:
+    """The centreline the ego follows: ``lane_id`` extended straight back by ``back_m`` [m] and ahead
+    by at least ``ahead_m`` [m] along the lanes that lead to the route's ``next_edges``, through
+    junctions (the paper's "virtual lanes"); straight on past a dead end. ``max_spacing`` [m]
+    densifies the polyline and ``round_corners`` passes of corner cutting round SUMO's coarse
+    vertices (:func:`hbmp_bench.planning.round_corners`), which the motion planner needs;
+    the defaults keep SUMO's vertices (enough for M_t)."""
+    shape = net.lane(lane_id).shape
+    back = shape[0] - shape[1]
+    back = back / max(np.hypot(*back), 1e-9)
+    pieces = [shape[0] + back * back_m, shape]
+    lane, beyond, k = lane_id, 0.0, 0
+    while beyond < ahead_m:
+        nxt = net.follow(lane, next_edges[k] if k < len(next_edges) else None)
+        if nxt is None:
+            fwd = pieces[-1][-1] - pieces[-1][-2]
+            pieces.append(pieces[-1][-1] + fwd / max(np.hypot(*fwd), 1e-9) * (ahead_m - beyond))
+            break
+        if nxt in net.lanes:
+            k += 1
+        pieces.append(net.lane(nxt).shape)
+        beyond += net.lane(nxt).length
+        lane = nxt
+    xy = np.vstack([np.atleast_2d(p) for p in pieces])
+    return Path(smooth_polyline(xy, round_corners) if round_corners else xy, max_spacing=max_spacing)
+
+
 class ObservationBuilder:
     """Builds M_t and R_t for one network and grid config."""
 
@@ -90,52 +119,43 @@ class ObservationBuilder:
 
     # ------------------------------------------------------------------ M_t
     def _followed_path(self, lane_id: str, next_edges: tuple[str, ...]) -> Path:
-        """Polyline (N, 2): ``lane_id`` extended straight back by ``back_m`` and ahead by ``ahead_m``
-        along the lanes that follow the route (``next_edges``) through junctions."""
-        cfg = self.config
-        shape = self.net.lane(lane_id).shape
-        back = shape[0] - shape[1]
-        back = back / max(np.hypot(*back), 1e-9)
-        pieces = [shape[0] + back * cfg.back_m, shape]
-        lane, beyond, k = lane_id, 0.0, 0
-        while beyond < cfg.ahead_m:
-            nxt = self.net.follow(lane, next_edges[k] if k < len(next_edges) else None)
-            if nxt is None:
-                fwd = pieces[-1][-1] - pieces[-1][-2]
-                pieces.append(pieces[-1][-1] + fwd / max(np.hypot(*fwd), 1e-9) * (cfg.ahead_m - beyond))
-                break
-            if nxt in self.net.lanes:
-                k += 1
-            pieces.append(self.net.lane(nxt).shape)
-            beyond += self.net.lane(nxt).length
-            lane = nxt
-        return Path(np.vstack([np.atleast_2d(p) for p in pieces]), max_spacing=None)
+        return followed_path(self.net, lane_id, next_edges, self.config.back_m, self.config.ahead_m)
 
     def occupancy(self, ego_xy: np.ndarray, ego_yaw: float, lane_id: str, next_edges: tuple[str, ...],
                   xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np.ndarray) -> np.ndarray:
         """M_t (1, rows, cols) float32 from the other actors (K,) arrays."""
-        cfg = self.config
-        grid = np.zeros((1, cfg.rows, cfg.cols), dtype=np.float32)
-        if len(xy) == 0:
-            return grid
-        near = np.hypot(*(xy - ego_xy).T) < cfg.rows * cfg.cell_long_m + 10.0
-        if not near.any():
-            return grid
-        points = _sample_boxes(xy[near], yaw[near], length[near], width[near])
-        if cfg.kind == "deformed":
-            path = self._path(lane_id, next_edges)
-            s_ego, _ = path.frenet(ego_xy)
-            s, lat = path.frenet(points, hint_s=s_ego, window=(cfg.back_m + 10.0, cfg.ahead_m + 10.0))
-            lon = s - s_ego
-        else:
-            rel = points - ego_xy
-            c, s_ = np.cos(ego_yaw), np.sin(ego_yaw)
-            lon, lat = rel[:, 0] * c + rel[:, 1] * s_, -rel[:, 0] * s_ + rel[:, 1] * c
-        i = np.floor((lon + cfg.back_m) / cfg.cell_long_m).astype(int)
-        j = np.floor((lat + cfg.half_width_m) / cfg.cell_lat_m).astype(int)
-        ok = (i >= 0) & (i < cfg.rows) & (j >= 0) & (j < cfg.cols)
-        grid[0, i[ok], j[ok]] = 1.0
+        path = self._path(lane_id, next_edges) if self.config.kind == "deformed" and len(xy) else None
+        return occupancy_grid(self.config, ego_xy, ego_yaw, path, xy, yaw, length, width)
+
+
+def occupancy_grid(cfg: ObservationConfig, ego_xy: np.ndarray, ego_yaw: float, path: Path | None,
+                   xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np.ndarray) -> np.ndarray:
+    """M_t (1, rows, cols) float32 from geometry alone (any simulator): the ego centre ``ego_xy`` (2,) [m]
+    and heading ``ego_yaw`` [rad], the followed-lane centreline ``path`` (needed for ``deformed``,
+    ignored for ``vehicle_centric``), and the other actors' footprints: centres ``xy`` (K, 2) [m],
+    headings ``yaw`` (K,) [rad], ``length`` / ``width`` (K,) [m]. Right-handed frame (y left of x)."""
+    grid = np.zeros((1, cfg.rows, cfg.cols), dtype=np.float32)
+    if len(xy) == 0:
         return grid
+    near = np.hypot(*(xy - ego_xy).T) < cfg.rows * cfg.cell_long_m + 10.0
+    if not near.any():
+        return grid
+    points = _sample_boxes(xy[near], yaw[near], length[near], width[near])
+    if cfg.kind == "deformed":
+        if path is None:
+            raise ValueError("a deformed M_t needs the followed lane's centreline (path)")
+        s_ego, _ = path.frenet(ego_xy)
+        s, lat = path.frenet(points, hint_s=s_ego, window=(cfg.back_m + 10.0, cfg.ahead_m + 10.0))
+        lon = s - s_ego
+    else:
+        rel = points - ego_xy
+        c, s_ = np.cos(ego_yaw), np.sin(ego_yaw)
+        lon, lat = rel[:, 0] * c + rel[:, 1] * s_, -rel[:, 0] * s_ + rel[:, 1] * c
+    i = np.floor((lon + cfg.back_m) / cfg.cell_long_m).astype(int)
+    j = np.floor((lat + cfg.half_width_m) / cfg.cell_lat_m).astype(int)
+    ok = (i >= 0) & (i < cfg.rows) & (j >= 0) & (j < cfg.cols)
+    grid[0, i[ok], j[ok]] = 1.0
+    return grid
 
 
 def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[str, ...], route_index: int,

@@ -12,13 +12,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hbmp_bench import __version__
+from hbmp_bench.envs.drivers import FIDELITIES, ContinuousConfig, ContinuousDriver, EventDriver, feasible_behaviors, obstacles_from
 from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, road_profile
 from hbmp_bench.maps import net_path
 from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents
 from hbmp_bench.metrics.geometry import LaneLocator
 from hbmp_bench.metrics.records import EpisodeRecord, driving_score
-from hbmp_bench.planning.behaviors import BehaviorConfig, reference_speed
+from hbmp_bench.planning.behaviors import BehaviorConfig
 from hbmp_bench.scenarios import Episode, road_network
 from hbmp_bench.sim.sumo import EGO_TYPE, SumoSim
 
@@ -38,32 +39,47 @@ TERMINAL_REWARD = {
 is counted like a wrong lane). Each event pays once, when it happens."""
 
 
+REWARDS = ("dense", "sparse")
+
+
 @dataclass(frozen=True)
 class WorldConfig:
     """Options of a driving world.
 
     Attributes:
-        fidelity: ``event`` (the paper's SUMO stage: a behavior completes within one decision
-            through SUMO's lane-change and speed commands).
+        fidelity: ``continuous`` (default: the paper's behavior-conditioned sampling motion planner
+            drives a bicycle model whose pose is pushed into SUMO every step; one behavior lasts
+            until it converges, 1-8 s) or ``event`` (the paper's SUMO stage: SUMO's speed and
+            lane-change commands complete a behavior within ``decision_period_s``).
+        reward: ``dense`` (r_k + r_T, HBMP: r_k = lambda(c~_total) of the executed trajectory,
+            0 in event fidelity) or ``sparse`` (r_T only, HBMP-S).
         decision_period_s: simulated time per decision in event fidelity [s] (paper: 10 Hz).
-        behavior: the v_ref rule of speed_up / speed_down, shared with the motion planner.
+        behavior: the v_ref rule of speed_up / speed_down, shared by both fidelities.
+        continuous: planner, executor and vehicle-model options of the continuous fidelity.
         observation: M_t grid options.
         background_route_m: length of the chained route each background vehicle gets, long
             enough that it circulates for the whole episode [m].
+        step_length_s: SUMO step [s] (the planner's control period in continuous fidelity).
     """
 
-    fidelity: str = "event"
+    fidelity: str = "continuous"
+    reward: str = "dense"
     decision_period_s: float = 0.1
     observation: ObservationConfig = field(default_factory=ObservationConfig)
     behavior: BehaviorConfig = field(default_factory=BehaviorConfig)
+    continuous: ContinuousConfig = field(default_factory=ContinuousConfig)
     background_route_m: float = 4000.0
     step_length_s: float = 0.1
 
     def __post_init__(self):
-        if self.fidelity not in ("event",):
-            raise ValueError(f"fidelity must be one of ('event',), got {self.fidelity!r}")
+        if self.fidelity not in FIDELITIES:
+            raise ValueError(f"fidelity must be one of {FIDELITIES}, got {self.fidelity!r}")
+        if self.reward not in REWARDS:
+            raise ValueError(f"reward must be one of {REWARDS}, got {self.reward!r}")
         if self.decision_period_s < self.step_length_s - 1e-9:
             raise ValueError("decision_period_s must be >= step_length_s")
+        if abs(self.continuous.executor.dt - self.step_length_s) > 1e-9:
+            raise ValueError("continuous.executor.dt must equal step_length_s (one control period per SUMO step)")
 
     @property
     def steps_per_decision(self) -> int:
@@ -85,6 +101,10 @@ class DrivingWorld:
         self.locator = LaneLocator(self.net)
         self.observer = ObservationBuilder(self.net, config.observation)
         self.sim = SumoSim(net_path(town), step_length=config.step_length_s)
+        if config.fidelity == "continuous":
+            self.driver = ContinuousDriver(self.sim, self.net, EGO_ID, EGO_TYPE, config.continuous, config.behavior)
+        else:
+            self.driver = EventDriver(self.sim, self.net, EGO_ID, config.steps_per_decision, config.behavior)
         self.episode: Episode | None = None
         self._reset_state()
 
@@ -96,6 +116,7 @@ class DrivingWorld:
         self._last_xy: np.ndarray | None = None
         self._ego = None
         self._light = None
+        self._actors = None
 
     # --------------------------------------------------------------- episode
     def start(self, episode: Episode, seed: int) -> tuple[dict, dict]:
@@ -122,12 +143,15 @@ class DrivingWorld:
         self._ego = self.sim.vehicle_state(EGO_ID)
         if self._ego is None:
             raise RuntimeError(f"SUMO did not insert the ego for {episode.key}")
+        self.driver.reset(self._ego)
+        self._ego = self.driver.observe(self._ego)
         self._last_xy = self._ego.xy
         self.goal_xy = self.net.position(episode.goal_lane, episode.goal_pos)
         self.detector = InfractionDetector(self.locator, self.goal_xy, episode.success_radius_m, episode.timeout_s)
         self._route_offsets = np.concatenate([[0.0], np.cumsum([self.net.edge_length[e] for e in episode.route])])
         self._route_pos = {e: i for i, e in enumerate(episode.route)}
         self._light = self.sim.light_ahead(EGO_ID)
+        self._actors = self.sim.snapshot().without(EGO_ID)
         return self._observe(StepEvents())
 
     def _continuation(self, edge: str, length_m: float = 400.0) -> tuple[str, ...]:
@@ -182,42 +206,44 @@ class DrivingWorld:
     # ------------------------------------------------------------------ step
     def action_mask(self) -> np.ndarray:
         """(5,) int8: 1 where a behavior is feasible for R_t (lane changes need the target lane)."""
-        mask = np.ones(len(BEHAVIORS), dtype=np.int8)
-        lane = self._ego.lane
-        mask[CHANGE_LEFT] = self.net.neighbour_lane(lane, +1) is not None
-        mask[CHANGE_RIGHT] = self.net.neighbour_lane(lane, -1) is not None
-        return mask
+        return feasible_behaviors(self.net, self._ego.lane)
+
+    def _next_edges(self, count: int = 3) -> tuple[str, ...]:
+        route, k = self.episode.route, min(self._ego.route_index, len(self.episode.route) - 1)
+        return route[k + 1: k + 1 + count]
 
     def step(self, behavior: int) -> tuple[dict, float, bool, bool, dict]:
-        """Execute one behavior; returns (observation, reward, terminated, truncated, info)."""
-        mask = self.action_mask()
-        executed = behavior if mask[behavior] else KEEP
-        ego = self._ego
-        limit = self.net.lane(ego.lane).speed
-        cfg = self.config
-        self.sim.set_speed(EGO_ID, reference_speed(executed, ego.speed, limit, cfg.behavior))
-        if executed in (CHANGE_LEFT, CHANGE_RIGHT):
-            side = +1 if executed == CHANGE_LEFT else -1
-            self.sim.change_lane(EGO_ID, self.net.lane(self.net.neighbour_lane(ego.lane, side)).index)
+        """Execute one behavior until it finishes or the episode ends.
+
+        Returns (observation, reward, terminated, truncated, info); ``info["duration_s"]`` is the
+        simulated time the behavior took.
+        """
+        executed = self.driver.begin(behavior, self._ego, self._next_edges())
         self.decisions += 1
         total = StepEvents()
         start_time = self.sim.time
-        for _ in range(cfg.steps_per_decision):
-            events = self._advance()
-            _accumulate(total, events)
+        while self.driver.before_step(self._planner_obstacles()):
+            _accumulate(total, self._advance())
             if self.done_reason:
                 break
         obs, info = self._observe(total)
         info["behavior"] = BEHAVIORS[behavior]
         info["behavior_executed"] = BEHAVIORS[executed]
-        info["duration_s"] = self.sim.time - start_time
-        reward = self._terminal_reward(total)
-        info["reward_components"] = {"r_k": 0.0, "r_T": reward}
+        info["duration_s"] = round(self.sim.time - start_time, 6)
+        r_terminal = self._terminal_reward(total)
+        r_k = self.driver.behavior_reward()
+        info["reward_components"] = {"r_k": r_k, "r_T": r_terminal}
+        info["planner_costs"] = self.driver.behavior_costs()
+        reward = r_terminal + (r_k if self.config.reward == "dense" else 0.0)
         terminated = self.done_reason in ("goal", "violation", "collision", "left_network")
         truncated = self.done_reason == "timeout"
         if terminated or truncated:
             info["episode"] = self.record().to_dict()
         return obs, reward, terminated, truncated, info
+
+    def _planner_obstacles(self):
+        a = self._actors
+        return obstacles_from(a.xy, a.yaw, a.speed, a.length, a.width)
 
     def _advance(self) -> StepEvents:
         """One simulation step plus detection; sets ``done_reason`` when the episode ends."""
@@ -226,6 +252,7 @@ class DrivingWorld:
         if state is None or EGO_ID in self.sim.arrived_ids():
             self.done_reason = "left_network"
             return StepEvents()
+        state = self.driver.observe(state)
         self._ego = state
         self.distance_m += float(np.hypot(*(state.xy - self._last_xy)))
         self._last_xy = state.xy
@@ -275,10 +302,7 @@ class DrivingWorld:
         route_index = min(ego.route_index, len(ep.route) - 1)
         light = None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance, self._light.state)
         road, scene = road_profile(self.net, ego.lane, ego.lane_pos, ep.route, route_index, ep.goal_lane, ego.speed, light)
-        actors = getattr(self, "_actors", None)
-        if actors is None:
-            actors = self.sim.snapshot().without(EGO_ID)
-            self._actors = actors
+        actors = self._actors
         occupancy = self.observer.occupancy(
             ego.xy, ego.yaw, ego.lane, ep.route[route_index + 1: route_index + 4],
             actors.xy, actors.yaw, actors.length, actors.width,

@@ -19,7 +19,7 @@ from .behaviors import Behavior, BehaviorConfig, reference_speed
 from .control import control_law, linear_speed_profile, omega_limit
 from .executor import (BehaviorExecutor, BehaviorOutcome, ExecutorConfig, ReferencePaths,
                        reward_from_cost, target_path)
-from .frame import Path, wrap_angle
+from .frame import Path, round_corners, wrap_angle
 from .planner import COST_NAMES, PlannerConfig, PlanningProblem, PlanResult, plan
 from .sim import Rollout, simulate_behavior
 from .state import Obstacles, VehicleState
@@ -31,7 +31,7 @@ __all__ = [
     "control_law", "linear_speed_profile", "omega_limit",
     "BehaviorExecutor", "BehaviorOutcome", "ExecutorConfig", "ReferencePaths",
     "reward_from_cost", "target_path",
-    "Path", "wrap_angle",
+    "Path", "round_corners", "wrap_angle",
     "COST_NAMES", "PlannerConfig", "PlanningProblem", "PlanResult", "plan",
     "Rollout", "simulate_behavior",
     "Obstacles", "VehicleState",

@@ -20,7 +20,8 @@
   tracking every step (:class:`.tracking.TrajectoryTracker`).
 * Finish: at the start of a step, after at least ``min_duration`` [s] of execution, the
   incoming ego state has ``|e| < e_thresh`` and ``|theta_e| < theta_thresh`` on the
-  target lane and, for speed_up / speed_down, ``|v - v_ref| < v_thresh``; or
+  target lane and, for speed_up / speed_down, ``|v - v_ref| < v_thresh`` (``v_ref`` capped
+  for curves by the latest plan, see :func:`.planner.curve_speed_cap`); or
   ``max_duration`` [s] has elapsed (reason ``"timeout"``).
 * ``c~_total`` of the executed trajectory = the MEAN of the chosen sample's ``c_total``
   over the replans whose control was executed (the final, finishing step is not counted).
@@ -188,7 +189,9 @@ class BehaviorExecutor:
         eps = 1e-9
         conv = abs(e) < c.e_thresh and abs(th) < c.theta_thresh
         if self.behavior in (Behavior.SPEED_UP, Behavior.SPEED_DOWN):
-            conv = conv and abs(ego.v - self.v_ref) < c.v_thresh
+            # the planner may cap v_ref for a curve ahead: converge to the speed it can hold
+            v_target = self.v_ref if self._plan is None else min(self.v_ref, self._plan.v_ref)
+            conv = conv and abs(ego.v - v_target) < c.v_thresh
         if conv and self.elapsed >= c.min_duration - eps:
             return "converged"
         if self.elapsed >= c.max_duration - eps:
@@ -206,6 +209,7 @@ class BehaviorExecutor:
         if not self._started:
             raise RuntimeError("BehaviorExecutor.step() before start()")
         obstacles = Obstacles.empty() if obstacles is None else obstacles
+        ego = self._course(ego)
         if not self._done:
             reason = self._finished(ego)
             if reason is not None:
@@ -225,6 +229,20 @@ class BehaviorExecutor:
                 self._collision_free &= self._plan.collision_free
             self.n_steps += 1
         return control, self._plan
+
+    def _course(self, ego: VehicleState) -> VehicleState:
+        """``ego`` with its yaw replaced by the centre's direction of travel ``yaw + beta``.
+
+        The planner rolls out a unicycle whose heading is the direction of travel; on the
+        bicycle model the footprint centre moves at the slip angle ``beta = atan(l_r / L
+        tan(steer))`` from the body yaw (~0.1 rad in a town corner). Planning, tracking and the
+        finish check all use the direction of travel.
+        """
+        vp = self.tracker.vehicle
+        if ego.steer == 0.0:
+            return ego
+        beta = math.atan(vp.rear_to_cg / vp.wheelbase * math.tan(ego.steer))
+        return VehicleState(ego.x, ego.y, ego.yaw + beta, ego.v, ego.steer)
 
     # ------------------------------------------------------------------ results
     @property

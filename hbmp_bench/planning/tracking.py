@@ -7,10 +7,13 @@ throttle and brake". Here:
   trajectory's speed profile at ``t_offset + speed_preview``; ``a >= 0`` maps to
   ``throttle = a / max_accel``, ``a < 0`` to ``brake = -a / max_decel``; at (near)
   standstill with ``v_des ~ 0`` a holding brake is applied;
-* lateral: pure pursuit from the rear axle to the point of the trajectory (polyline
-  of its ``x, y``) one look-ahead distance ``clip(lookahead_time v, min_lookahead,
-  max_lookahead)`` ahead of the point closest to the vehicle (extended straight past the
-  trajectory's end); ``delta = atan(2 L sin(alpha) / l_d)``, ``steer = delta / max_steer``.
+* lateral: pure pursuit from the footprint centre (the planned positions are centres) to
+  the point of the trajectory (polyline of its ``x, y``) one look-ahead distance
+  ``clip(lookahead_time v, min_lookahead, max_lookahead)`` ahead of the point closest to
+  the vehicle (extended straight past the trajectory's end): arc curvature
+  ``kappa = 2 sin(alpha) / l_d`` with ``alpha`` measured from the centre's velocity
+  direction, converted to the bicycle's front-wheel angle (see :meth:`steer_angle`);
+  ``steer = delta / max_steer``.
 """
 
 from __future__ import annotations
@@ -128,19 +131,28 @@ class TrajectoryTracker:
         self.pid.reset()
 
     def steer_angle(self, state: VehicleState, trajectory: np.ndarray) -> float:
-        """Pure-pursuit front-wheel angle [rad] (not clipped) towards ``trajectory`` (T, >=2)."""
+        """Pure-pursuit front-wheel angle [rad] (not clipped) towards ``trajectory`` (T, >=2).
+
+        The planned positions are footprint centres, so the pursuit runs from the centre: the
+        arc tangent to ``state.yaw`` through the look-ahead point has curvature
+        ``kappa = 2 sin(alpha) / l_d``; ``state.yaw`` must be the centre's direction of travel
+        (the executor passes ``yaw + beta``, see ``BehaviorExecutor._course``), and the bicycle model's centre
+        follows curvature ``kappa`` with ``tan(delta) = kappa L / sqrt(1 - (l_r kappa)^2)``.
+        (Pursuing from the rear axle towards centre positions would see a flatter arc and
+        steer about half of what a curve needs.)
+        """
         c = self.cfg
         vp = self.vehicle
         ld = min(max(c.lookahead_time * state.v, c.min_lookahead), c.max_lookahead)
-        rear = np.array([state.x - vp.rear_to_cg * math.cos(state.yaw),
-                         state.y - vp.rear_to_cg * math.sin(state.yaw)])
         target = _lookahead_point(np.asarray(trajectory, float)[:, :2], state.xy, ld)
-        dx, dy = target - rear
+        dx, dy = target - state.xy
         dist = math.hypot(dx, dy)
         if dist < 1e-6:
             return 0.0
         alpha = math.atan2(dy, dx) - state.yaw
-        return math.atan(2.0 * vp.wheelbase * math.sin(alpha) / dist)
+        kappa = 2.0 * math.sin(alpha) / dist
+        lk = min(abs(vp.rear_to_cg * kappa), 0.99)
+        return math.atan(kappa * vp.wheelbase / math.sqrt(1.0 - lk * lk))
 
     def control(self, state: VehicleState, trajectory: np.ndarray, times: np.ndarray,
                 dt: float, t_offset: float = 0.0) -> Control:

@@ -143,6 +143,7 @@ class SumoSim:
         self.step_length = float(step_length)
         self._dims: dict[str, tuple[float, float, bool]] = {}
         self._routes = 0
+        self._controlled: dict[str, list[str]] | None = None
 
     # --------------------------------------------------------------- lifecycle
     @property
@@ -173,6 +174,7 @@ class SumoSim:
             ]
         )
         SumoSim._active = self
+        self._controlled = None
         self._dims = {}
         self._routes = 0
         for vtype in (EGO_TYPE, BACKGROUND_TYPE):
@@ -314,7 +316,35 @@ class SumoSim:
         """Replace a vehicle's route (must start with its current edge)."""
         libsumo.vehicle.setRoute(vehicle_id, list(route))
 
-    def move_to_xy(self, vehicle_id: str, edge: str, lane_index: int, xy: np.ndarray, yaw: float, length: float) -> None:
-        """Place a vehicle's centre at ``xy`` with heading ``yaw`` (free placement, route kept if possible)."""
-        front = np.asarray(xy) + length / 2 * np.array([math.cos(yaw), math.sin(yaw)])
-        libsumo.vehicle.moveToXY(vehicle_id, edge, int(lane_index), float(front[0]), float(front[1]), yaw_to_sumo_angle(yaw), 2)
+    def move_to_xy(self, vehicle_id: str, xy: np.ndarray, yaw: float, *, edge: str = "", lane_index: int = -1,
+                   on_route: bool = True) -> None:
+        """Place a vehicle's footprint centre at ``xy`` [m] with heading ``yaw`` [rad] in the next step.
+
+        ``on_route`` (SUMO keepRoute=1) maps the pose onto the closest lane of the vehicle's own
+        route, so its route, route index and next traffic lights stay valid (what a driven ego
+        needs); otherwise the vehicle may go anywhere, even off the road (keepRoute=2), and its
+        route shrinks to the edge it lands on. ``edge`` / ``lane_index`` are optional hints.
+        """
+        length = self._dims[vehicle_id][0]
+        front = np.asarray(xy, dtype=float) + length / 2 * np.array([math.cos(yaw), math.sin(yaw)])
+        libsumo.vehicle.moveToXY(vehicle_id, edge, int(lane_index), float(front[0]), float(front[1]),
+                                 yaw_to_sumo_angle(yaw), 1 if on_route else 2)
+
+    def light_states(self) -> dict[str, str]:
+        """Signal char of every controlled lane now: incoming lane id -> ``r``/``y``/``g``/``G``...
+
+        A lane with several links (e.g. straight and turn) reports the most permissive one.
+        """
+        if self._controlled is None:
+            self._controlled = {
+                tls: [links[0][0] if links else "" for links in libsumo.trafficlight.getControlledLinks(tls)]
+                for tls in libsumo.trafficlight.getIDList()
+            }
+        out: dict[str, str] = {}
+        rank = {"G": 4, "g": 3, "y": 2, "Y": 2, "r": 1, "R": 1}
+        for tls, lanes in self._controlled.items():
+            state = libsumo.trafficlight.getRedYellowGreenState(tls)
+            for lane, char in zip(lanes, state):
+                if lane and rank.get(char, 0) >= rank.get(out.get(lane, ""), 0):
+                    out[lane] = char
+        return out

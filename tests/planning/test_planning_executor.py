@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from hbmp_bench.planning import (Behavior, BehaviorExecutor, ExecutorConfig, Obstacles, Path,
-                                 PlannerConfig, ReferencePaths, VehicleState, reward_from_cost,
+                                 PlannerConfig, ReferencePaths, VehicleParams, VehicleState, reward_from_cost,
                                  simulate_behavior, step)
 from hbmp_bench.planning.planner import _sat_overlap
 
@@ -32,7 +32,11 @@ def curved_refs(R=60.0):
 
 
 def errors(path, s: VehicleState):
-    _, e, th, _ = path.project(s.xy, s.yaw)
+    """Lateral and heading error of the footprint centre's direction of travel (body yaw plus
+    the bicycle's slip angle), the heading the executor's finish check uses."""
+    vp = VehicleParams()
+    course = s.yaw + np.arctan(vp.rear_to_cg / vp.wheelbase * np.tan(s.steer))
+    _, e, th, _ = path.project(s.xy, course)
     return e, th
 
 

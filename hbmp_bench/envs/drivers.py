@@ -1,0 +1,186 @@
+"""How one behavior moves one SUMO vehicle: a driver per fidelity, one protocol.
+
+A driver executes one behavior at a time for one vehicle; the world steps SUMO around it::
+
+    executed = driver.begin(behavior, state, next_edges)   # behavior actually run (infeasible -> keep)
+    while driver.before_step(others):                       # False once the behavior has finished
+        sim.step()
+        state = driver.observe(sim_state)                   # pose the detectors and M_t use
+    r_k = driver.behavior_reward()                          # the paper's lambda(c~_total); 0 in event fidelity
+
+- :class:`EventDriver` -- the paper's SUMO stage: SUMO's speed and lane-change commands complete the
+  behavior within one decision period.
+- :class:`ContinuousDriver` -- the paper's behavior-conditioned sampling motion planner
+  (:mod:`hbmp_bench.planning`): replanning and tracking at 10 Hz on a kinematic bicycle model whose
+  pose is pushed into SUMO every step (``moveToXY``), so background traffic and pedestrians react to
+  it. The behavior lasts until the executor's finish condition holds (variable duration).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from hbmp_bench.envs.observation import followed_path
+from hbmp_bench.maps.roadnet import RoadNetwork
+from hbmp_bench.planning import (BehaviorConfig, BehaviorExecutor, ExecutorConfig, Obstacles, PlannerConfig,
+                                 PlanResult, ReferencePaths, VehicleParams, reference_speed)
+from hbmp_bench.planning import VehicleState as ModelState
+from hbmp_bench.planning import step as bicycle_step
+from hbmp_bench.sim.sumo import SumoSim, VehicleState, VehicleType
+
+SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = range(5)
+FIDELITIES = ("event", "continuous")
+
+
+def feasible_behaviors(net: RoadNetwork, lane_id: str) -> np.ndarray:
+    """(5,) int8 mask: 1 where a behavior is feasible on ``lane_id`` (lane changes need that lane)."""
+    mask = np.ones(5, dtype=np.int8)
+    mask[CHANGE_LEFT] = net.neighbour_lane(lane_id, +1) is not None
+    mask[CHANGE_RIGHT] = net.neighbour_lane(lane_id, -1) is not None
+    return mask
+
+
+@dataclass(frozen=True)
+class ContinuousConfig:
+    """Options of the continuous (motion-planner) fidelity.
+
+    Attributes:
+        planner: sampling planner parameters (footprint is set from the vehicle type).
+        executor: replanning period, finish thresholds and min / max behavior duration.
+        vehicle: bicycle-model geometry and actuator limits.
+        lane_back_m / lane_ahead_m: reference centreline kept behind / ahead of the lane start [m].
+        obstacle_radius_m: actors farther than this from the ego are left out of planning [m].
+    """
+
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    executor: ExecutorConfig = field(default_factory=ExecutorConfig)
+    vehicle: VehicleParams = field(default_factory=VehicleParams)
+    lane_back_m: float = 20.0
+    lane_ahead_m: float = 80.0
+    obstacle_radius_m: float = 60.0
+
+
+class EventDriver:
+    """SUMO drives the behavior: v_ref through ``setSpeed``, lane changes through ``changeLane``.
+
+    Args:
+        sim / net: the simulation and its road network.
+        vehicle_id: the SUMO vehicle (already handed over, see :meth:`SumoSim.hand_over`).
+        steps: simulation steps per behavior.
+        behavior: the v_ref rule of speed_up / speed_down.
+    """
+
+    def __init__(self, sim: SumoSim, net: RoadNetwork, vehicle_id: str, steps: int, behavior: BehaviorConfig):
+        self.sim, self.net, self.vehicle_id = sim, net, vehicle_id
+        self.steps, self.behavior_config = steps, behavior
+        self._left = 0
+        self.last_plan: PlanResult | None = None
+
+    def reset(self, state: VehicleState) -> None:
+        self._left = 0
+
+    def begin(self, behavior: int, state: VehicleState, next_edges: tuple[str, ...]) -> int:
+        executed = behavior if feasible_behaviors(self.net, state.lane)[behavior] else KEEP
+        limit = self.net.lane(state.lane).speed
+        self.sim.set_speed(self.vehicle_id, reference_speed(executed, state.speed, limit, self.behavior_config))
+        if executed in (CHANGE_LEFT, CHANGE_RIGHT):
+            side = +1 if executed == CHANGE_LEFT else -1
+            self.sim.change_lane(self.vehicle_id, self.net.lane(self.net.neighbour_lane(state.lane, side)).index)
+        self._left = self.steps
+        return executed
+
+    def before_step(self, others: Obstacles) -> bool:
+        if self._left <= 0:
+            return False
+        self._left -= 1
+        return True
+
+    def observe(self, state: VehicleState) -> VehicleState:
+        return state
+
+    def behavior_reward(self) -> float:
+        return 0.0
+
+    def behavior_costs(self) -> dict[str, float]:
+        return {}
+
+
+class ContinuousDriver:
+    """The motion planner drives the behavior on a bicycle model; SUMO only mirrors the pose.
+
+    Args:
+        sim / net / vehicle_id: as :class:`EventDriver`.
+        vtype: the vehicle's SUMO type (its footprint is the planner's).
+        config: planner, executor and vehicle-model options.
+        behavior: the v_ref rule of speed_up / speed_down.
+    """
+
+    def __init__(self, sim: SumoSim, net: RoadNetwork, vehicle_id: str, vtype: VehicleType,
+                 config: ContinuousConfig, behavior: BehaviorConfig):
+        self.sim, self.net, self.vehicle_id, self.config = sim, net, vehicle_id, config
+        planner = dataclasses.replace(config.planner, length=vtype.length, width=vtype.width,
+                                      dt=config.executor.dt)
+        self.executor = BehaviorExecutor(planner=planner, config=config.executor, behavior_cfg=behavior,
+                                         vehicle=config.vehicle)
+        self.dt = config.executor.dt
+        self.model: ModelState | None = None
+        self.last_plan: PlanResult | None = None
+        self._path = functools.lru_cache(maxsize=512)(
+            lambda lane, nxt: followed_path(net, lane, nxt, config.lane_back_m, config.lane_ahead_m,
+                                            max_spacing=1.0, round_corners=3))
+
+    def reset(self, state: VehicleState) -> None:
+        """Take the vehicle's pose from SUMO at the start of an episode (speed kept, steering centred)."""
+        self.model = ModelState(float(state.xy[0]), float(state.xy[1]), float(state.yaw), max(float(state.speed), 0.0))
+        self.last_plan = None
+
+    def reference_paths(self, lane_id: str, next_edges: tuple[str, ...]) -> ReferencePaths:
+        """Centrelines of the left, current and right lane, each continued along the route."""
+        sides = [self.net.neighbour_lane(lane_id, side) for side in (+1, -1)]
+        left, right = (None if lane is None else self._path(lane, next_edges) for lane in sides)
+        return ReferencePaths(left, self._path(lane_id, next_edges), right)
+
+    def begin(self, behavior: int, state: VehicleState, next_edges: tuple[str, ...]) -> int:
+        refs = self.reference_paths(state.lane, tuple(next_edges))
+        limit = self.net.lane(state.lane).speed
+        return int(self.executor.start(behavior, self.model, refs, limit))
+
+    def before_step(self, others: Obstacles) -> bool:
+        """Plan and track one control period; push the new pose into SUMO. False when finished."""
+        model = self.model
+        if len(others):
+            near = np.hypot(others.x - model.x, others.y - model.y) < self.config.obstacle_radius_m
+            others = others.subset(near)
+        control, plan = self.executor.step(model, others)
+        self.last_plan = plan
+        if self.executor.done:
+            return False
+        self.model = bicycle_step(model, control, self.dt, self.config.vehicle)
+        self.sim.move_to_xy(self.vehicle_id, self.model.xy, self.model.yaw)
+        return True
+
+    def observe(self, state: VehicleState) -> VehicleState:
+        """SUMO's lane bookkeeping with the model's exact pose and speed."""
+        m = self.model
+        return dataclasses.replace(state, xy=m.xy, yaw=float(m.yaw), speed=float(m.v))
+
+    def behavior_reward(self) -> float:
+        """r_k = lambda(c~_total) of the behavior just executed (see :func:`planning.reward_from_cost`)."""
+        return float(self.executor.reward())
+
+    def behavior_costs(self) -> dict[str, float]:
+        out = self.executor.outcome()
+        names = ("c_velocity", "c_dist", "c_obs")
+        return {"c_total": out.c_total, **{n: float(c) for n, c in zip(names, out.c_terms)},
+                "finish": out.reason}
+
+
+def obstacles_from(xy: np.ndarray, yaw: np.ndarray, speed: np.ndarray, length: np.ndarray,
+                   width: np.ndarray) -> Obstacles:
+    """Planner obstacles (constant-velocity prediction) from (K,) actor arrays."""
+    return Obstacles(xy[:, 0], xy[:, 1], yaw, speed, length, width)
+
