@@ -9,7 +9,8 @@ import sys
 
 from hbmp_bench.errors import UnknownNameError
 
-COMMAND_MODULES: tuple[str, ...] = ()
+COMMAND_MODULES: tuple[str, ...] = ("hbmp_bench.render.commands", "hbmp_bench.transfer.commands",
+                                    "hbmp_bench.evaluation.commands", "hbmp_bench.training.commands")
 """Modules that add their own sub-commands: each has ``add_commands(subparsers)``, whose parsers
 set ``func`` (``args -> exit code``). Keeps each room's commands beside its code."""
 
@@ -75,32 +76,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_evaluate(args: argparse.Namespace) -> int:
-    import os
-
-    from hbmp_bench.agents import load_agent
-    from hbmp_bench.evaluation import Job, run_jobs
-    from hbmp_bench.metrics import append_record, success_table, summarize
-    from hbmp_bench.scenarios import check_task, check_town, get_suite
-
-    suite = get_suite(args.suite)
-    load_agent(args.agent)
-    towns = [check_town(t) for t in (args.towns or suite.towns)]
-    tasks = [check_task(t) for t in (args.tasks or suite.tasks)]
-    n = min(args.episodes or suite.episodes_per_task, suite.episodes_per_task)
-    jobs = [Job(suite.name, town, task, args.agent, tuple(range(n)), args.fidelity) for town in towns for task in tasks]
-    records = run_jobs(jobs, workers=args.workers or os.cpu_count() or 1)
-    if args.out:
-        os.makedirs(args.out, exist_ok=True)
-        path = os.path.join(args.out, f"{suite.name}__{args.agent.replace(':', '.')}.jsonl")
-        for r in records:
-            append_record(path, r)
-        print(f"records: {path}")
-    print(success_table(records).to_string())
-    print(json.dumps(summarize(records), indent=2))
-    return 0
-
-
 def _cmd_maps(args: argparse.Namespace) -> int:
     from hbmp_bench.maps import available_maps, import_map, map_stats
 
@@ -135,20 +110,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--agent", default="expert", help="registry name or module:Class")
     p.add_argument("--episodes", type=int, default=5)
     p.add_argument("--suite", default="corl2017")
-    p.add_argument("--fidelity", default="event")
+    p.add_argument("--fidelity", default=None, choices=("continuous", "event"),
+                   help="default: the env's (continuous, the motion planner)")
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_run)
-
-    p = sub.add_parser("evaluate", help="run an agent on a suite (towns x tasks) in worker processes")
-    p.add_argument("--suite", default="corl2017")
-    p.add_argument("--agent", default="expert")
-    p.add_argument("--towns", nargs="*")
-    p.add_argument("--tasks", nargs="*")
-    p.add_argument("--episodes", type=int, default=None, help="episodes per (town, task); default: the suite's")
-    p.add_argument("--workers", type=int, default=None, help="default: one per core")
-    p.add_argument("--fidelity", default="event")
-    p.add_argument("--out", default=None, help="directory for the JSON-lines records")
-    p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser("maps", help="map statistics and import")
     msub = p.add_subparsers(dest="maps_cmd", required=True)

@@ -94,7 +94,8 @@ class ExpertAgent:
         gap = self._gap_ahead(self._corridor(occ, 0))
         target = min(target, self._stop_speed(gap - travel))
         light, d_stop = scene["light"], scene["stop_distance_m"]
-        must_stop = light in ("r", "R", "u") or (light in ("y", "Y") and v * v / (2 * 4.5) < d_stop - 1.0 - travel)
+        can_stop = v * v / (2 * self._decel) < d_stop - 1.0 - travel
+        must_stop = light in ("r", "R", "u") or (light in ("y", "Y") and can_stop)
         if must_stop:
             target = min(target, self._stop_speed(d_stop - travel + self.stop_margin_m - 1.0))
         if not scene["in_junction"] and road[3] < 0.5 and d_stop < 30.0:
@@ -116,6 +117,9 @@ class ExpertAgent:
 
         if v > target + 0.3 or (target < 0.5 and v > 0.0):
             return SPEED_DOWN
-        if v < target - 1.0:
+        # speed_up sets v_ref = v + max(20 %, 2 m/s) and holds it for a whole behavior: only
+        # when that speed is still safe (decisions every 0.1 s can take smaller steps)
+        step_up = max(0.2 * v, 2.0) if period > 0.2 else 0.0
+        if v < target - 1.0 and v + step_up <= target + 0.5:
             return SPEED_UP
         return KEEP

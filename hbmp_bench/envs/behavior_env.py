@@ -19,8 +19,11 @@ class BehaviorEnv(gym.Env):
     ## Description
     The ego drives from a start to a goal pose along a global route on a SUMO recreation of a
     CARLA town, among background vehicles and pedestrians driven by SUMO. Each step the agent
-    picks one of five behaviors; the behavior is executed until it completes (event fidelity:
-    within one 0.1 s decision through SUMO's speed and lane-change commands).
+    picks one of five behaviors; the behavior is executed until it completes: by default
+    (``fidelity="continuous"``) the paper's behavior-conditioned sampling motion planner replans
+    at 10 Hz and drives a bicycle model until the ego has converged to the target lane and speed
+    (1-8 s, ``info["duration_s"]``); with ``fidelity="event"`` SUMO's speed and lane-change
+    commands complete it within one 0.1 s decision (the paper's SUMO stage).
 
     ## Action space
     ``Discrete(5)``, the paper's order: 0 speed_up, 1 speed_down, 2 change_left, 3 change_right,
@@ -32,9 +35,11 @@ class BehaviorEnv(gym.Env):
     M_t and R_t, see :mod:`hbmp_bench.envs.observation` for every cell and entry.
 
     ## Rewards
-    The paper's r_T, paid when the event happens: +100 goal, −50 collision or timeout, −10 red
-    light, −1 wrong lane / off-road. ``info["reward_components"]`` splits r_k (planner cost,
-    0 in event fidelity) and r_T.
+    ``reward="dense"`` (default, HBMP): r_k + r_T. r_k = λ(c̃_total) = −c̃_total, the mean cost of
+    the planner's chosen trajectories over the behavior (0 in event fidelity); r_T is the paper's
+    terminal reward, paid when the event happens: +100 goal, −50 collision or timeout, −10 red
+    light, −1 wrong lane / off-road. ``reward="sparse"`` (HBMP-S): r_T only.
+    ``info["reward_components"]`` has both; ``info["planner_costs"]`` the cost terms.
 
     ## Episode end
     Terminated at the goal (ego centre within the suite's radius, 2 m), when the ego leaves the
@@ -48,7 +53,7 @@ class BehaviorEnv(gym.Env):
     suite: episode list and rules (``corl2017`` default, ``hbmp``, ``nocrash-*``).
     episode_index: fix one episode of the list; None cycles by reset seed (seed % episodes).
     random_goals: ignore the suite list and draw a fresh start and goal every reset (training).
-    fidelity, decision_period_s: see :class:`WorldConfig`.
+    fidelity, reward, decision_period_s: see :class:`WorldConfig` (None: its defaults).
     observation: ``deformed`` or ``vehicle_centric`` M_t; grid options via ``observation_config``.
     density: override background traffic (``empty``, ``corl``, ``regular``, ``dense``).
 
@@ -65,7 +70,8 @@ class BehaviorEnv(gym.Env):
         suite: str = "corl2017",
         episode_index: int | None = None,
         random_goals: bool = False,
-        fidelity: str = "event",
+        fidelity: str | None = None,
+        reward: str = "dense",
         decision_period_s: float = 0.1,
         observation: str = "deformed",
         observation_config: ObservationConfig | None = None,
@@ -80,7 +86,9 @@ class BehaviorEnv(gym.Env):
         self.random_goals = random_goals
         self.density = density
         obs_cfg = observation_config or ObservationConfig(kind=observation)
-        self.config = WorldConfig(fidelity=fidelity, decision_period_s=decision_period_s, observation=obs_cfg)
+        fidelity = WorldConfig.fidelity if fidelity is None else fidelity
+        self.config = WorldConfig(fidelity=fidelity, reward=reward, decision_period_s=decision_period_s,
+                                  observation=obs_cfg)
         self.episodes = () if random_goals else suite_episodes(self.suite.name, town, task)
         if episode_index is not None and not 0 <= episode_index < len(self.episodes):
             raise ValueError(f"episode_index must be in [0, {len(self.episodes)}), got {episode_index}")

@@ -140,7 +140,11 @@ def occupancy_grid(cfg: ObservationConfig, ego_xy: np.ndarray, ego_yaw: float, p
     near = np.hypot(*(xy - ego_xy).T) < cfg.rows * cfg.cell_long_m + 10.0
     if not near.any():
         return grid
-    points = _sample_boxes(xy[near], yaw[near], length[near], width[near])
+    # samples no farther apart than a cell along both box axes, so no covered cell is skipped
+    step = min(cfg.cell_long_m, cfg.cell_lat_m)
+    n_long = max(10, int(np.ceil(float(length[near].max()) / step)) + 1)
+    n_lat = max(4, int(np.ceil(float(width[near].max()) / step)) + 1)
+    points = _sample_boxes(xy[near], yaw[near], length[near], width[near], n_long=n_long, n_lat=n_lat)
     if cfg.kind == "deformed":
         if path is None:
             raise ValueError("a deformed M_t needs the followed lane's centreline (path)")

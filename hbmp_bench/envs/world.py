@@ -154,8 +154,11 @@ class DrivingWorld:
         self._actors = self.sim.snapshot().without(EGO_ID)
         return self._observe(StepEvents())
 
-    def _continuation(self, edge: str, length_m: float = 400.0) -> tuple[str, ...]:
-        """Edges after the goal so SUMO does not remove the ego on arrival (straight where possible)."""
+    def _continuation(self, edge: str, length_m: float = 30.0) -> tuple[str, ...]:
+        """Edges after the goal so SUMO does not remove an ego that overshoots the goal (straight
+        where possible). Short on purpose: in continuous fidelity SUMO maps the ego's pose onto
+        its route, and a long continuation that comes back through a junction of the route
+        could capture the ego there."""
         out, total = [], 0.0
         while total < length_m:
             options = self.net.successors(edge)

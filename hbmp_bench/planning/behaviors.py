@@ -6,9 +6,12 @@ change_left, change_right, and keep, v_ref keeps the same to the current velocit
 
 Here the speed step is ``max(speed_change_frac * |v|, min_speed_step)`` so that a
 ``speed_up`` from standstill (where a percentage is 0) still moves the car; the result is
-clipped to ``[0, speed_limit]``. ``keep`` / lane changes use ``v_ref = v_current``
-unchanged (no creep, no clipping to the limit: the paper keeps the current velocity;
-a stopped car stays stopped until the behavior planner chooses ``speed_up``).
+clipped to ``[0, speed_limit]``. ``keep`` uses ``v_ref = v_current`` unchanged (no creep,
+no clipping to the limit: the paper keeps the current velocity; a stopped car stays
+stopped until the behavior planner chooses ``speed_up``). Lane changes keep the current
+velocity too, but at least ``min_lane_change_speed`` (capped by the limit): a car cannot
+move sideways at standstill, so a lane change chosen while stopped would never complete
+(the event stage's SUMO lane change is instantaneous and needs no speed).
 """
 
 from __future__ import annotations
@@ -42,12 +45,15 @@ class BehaviorConfig:
 
     speed_change_frac: float = 0.2
     min_speed_step: float = 2.0
+    min_lane_change_speed: float = 2.0
 
     def __post_init__(self):
         if not 0.0 < self.speed_change_frac < 1.0:
             raise ValueError(f"speed_change_frac must be in (0, 1), got {self.speed_change_frac!r}")
         if not self.min_speed_step >= 0.0:
             raise ValueError(f"min_speed_step must be >= 0 [m/s], got {self.min_speed_step!r}")
+        if not self.min_lane_change_speed >= 0.0:
+            raise ValueError(f"min_lane_change_speed must be >= 0 [m/s], got {self.min_lane_change_speed!r}")
 
 
 def reference_speed(
@@ -66,7 +72,8 @@ def reference_speed(
 
     Returns:
         ``speed_up``: ``min(v + step, speed_limit)``; ``speed_down``: ``max(v - step, 0)``
-        (also at most ``speed_limit``); others: ``v_current``;
+        (also at most ``speed_limit``); change_left / change_right:
+        ``max(v_current, min(min_lane_change_speed, speed_limit))``; keep: ``v_current``;
         ``step = max(speed_change_frac * |v|, min_speed_step)``.
     """
     b = Behavior(int(behavior))
@@ -80,4 +87,6 @@ def reference_speed(
         return float(min(max(v + step, 0.0), speed_limit))
     if b == Behavior.SPEED_DOWN:
         return float(min(max(v - step, 0.0), speed_limit))
+    if b in (Behavior.CHANGE_LEFT, Behavior.CHANGE_RIGHT):
+        return max(v, min(cfg.min_lane_change_speed, speed_limit))
     return v
