@@ -33,13 +33,15 @@ class ExpertAgent:
             planner): what a chain of speed_down behaviors achieves (v_ref steps of
             max(20 %, 2 m/s) per ~1 s behavior) [m/s²].
         stop_margin_m: distance kept to a stop line or an obstacle [m].
+        turn_speed_mps: speed it reaches a turning junction with (``scene["turn_ahead"]``) [m/s].
         grid: the M_t grid it reads (must match the environment's).
     """
 
     name = "expert"
 
     def __init__(self, cruise_fraction: float = 0.9, comfort_decel: float = 3.0, behavior_decel: float = 1.8,
-                 stop_margin_m: float = 5.0, grid: ObservationConfig | None = None):
+                 stop_margin_m: float = 5.0, turn_speed_mps: float = 6.0, grid: ObservationConfig | None = None):
+        self.turn_speed_mps = turn_speed_mps
         self.cruise_fraction = cruise_fraction
         self.comfort_decel = comfort_decel
         self.behavior_decel = behavior_decel
@@ -92,14 +94,22 @@ class ExpertAgent:
         self._decel = self.comfort_decel if period <= 0.2 else min(self.comfort_decel, self.behavior_decel)
 
         gap = self._gap_ahead(self._corridor(occ, 0))
-        target = min(target, self._stop_speed(gap - travel))
         light, d_stop = scene["light"], scene["stop_distance_m"]
-        can_stop = v * v / (2 * self._decel) < d_stop - 1.0 - travel
+        can_stop = v * v / (2 * self._decel) < d_stop - 1.0  # braking could start now
         must_stop = light in ("r", "R", "u") or (light in ("y", "Y") and can_stop)
+        # where the ego must be standing by: behind the car ahead, before a red stop line, and,
+        # in a lane that does not continue the route, early enough to change lanes from there
+        stop_at = gap
         if must_stop:
-            target = min(target, self._stop_speed(d_stop - travel + self.stop_margin_m - 1.0))
+            stop_at = min(stop_at, d_stop + self.stop_margin_m - 1.0)
         if not scene["in_junction"] and road[3] < 0.5 and d_stop < 30.0:
-            target = min(target, self._stop_speed(d_stop - travel + self.stop_margin_m - 1.0))
+            room_to_change = 12.0 if period > 0.2 else 0.0
+            stop_at = min(stop_at, d_stop + self.stop_margin_m - 1.0 - room_to_change)
+        target = min(target, self._stop_speed(stop_at - travel))
+        if scene.get("turn_ahead", "") in ("l", "L", "r", "R"):
+            # reach a turn at turn speed, so it is not taken braking in the junction (or on red)
+            room = max(d_stop - travel - 5.0, 0.0)
+            target = min(target, float(np.sqrt(self.turn_speed_mps ** 2 + 2 * self._decel * room)))
 
         self._stuck_s = self._stuck_s + period if (v < 0.5 and gap < 15.0 and not must_stop) else 0.0
         if not scene["in_junction"]:
@@ -119,7 +129,11 @@ class ExpertAgent:
             return SPEED_DOWN
         # speed_up sets v_ref = v + max(20 %, 2 m/s) and holds it for a whole behavior: only
         # when that speed is still safe (decisions every 0.1 s can take smaller steps)
-        step_up = max(0.2 * v, 2.0) if period > 0.2 else 0.0
-        if v < target - 1.0 and v + step_up <= target + 0.5:
-            return SPEED_UP
+        if v < target - 1.0:
+            if period <= 0.2:
+                return SPEED_UP
+            v_new = v + max(0.2 * v, 2.0)
+            after = stop_at - 0.5 * (v + v_new) * period  # where the next decision happens
+            if v_new <= target + 0.5 and v_new <= self._stop_speed(after):
+                return SPEED_UP
         return KEEP

@@ -2,7 +2,7 @@
 
 A driver executes one behavior at a time for one vehicle; the world steps SUMO around it::
 
-    executed = driver.begin(behavior, state, next_edges)   # behavior actually run (infeasible -> keep)
+    executed = driver.begin(behavior, state, lane, next_edges)   # behavior actually run (infeasible -> keep)
     while driver.before_step(others):                       # False once the behavior has finished
         sim.step()
         state = driver.observe(sim_state)                   # pose the detectors and M_t use
@@ -83,7 +83,8 @@ class EventDriver:
     def reset(self, state: VehicleState) -> None:
         self._left = 0
 
-    def begin(self, behavior: int, state: VehicleState, next_edges: tuple[str, ...]) -> int:
+    def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...]) -> int:
+        """Start ``behavior``; ``lane`` is the lane followed (SUMO's own lane in event fidelity)."""
         executed = behavior if feasible_behaviors(self.net, state.lane)[behavior] else KEEP
         limit = self.net.lane(state.lane).speed
         self.sim.set_speed(self.vehicle_id, reference_speed(executed, state.speed, limit, self.behavior_config))
@@ -144,9 +145,11 @@ class ContinuousDriver:
         left, right = (None if lane is None else self._path(lane, next_edges) for lane in sides)
         return ReferencePaths(left, self._path(lane_id, next_edges), right)
 
-    def begin(self, behavior: int, state: VehicleState, next_edges: tuple[str, ...]) -> int:
-        refs = self.reference_paths(state.lane, tuple(next_edges))
-        limit = self.net.lane(state.lane).speed
+    def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...]) -> int:
+        """Start ``behavior`` on the centreline of ``lane`` continued along ``next_edges`` (in a
+        junction: the lane before it, so the path runs through the route's own connection)."""
+        refs = self.reference_paths(lane, tuple(next_edges))
+        limit = self.net.lane(lane).speed
         return int(self.executor.start(behavior, self.model, refs, limit))
 
     def before_step(self, others: Obstacles) -> bool:

@@ -185,8 +185,11 @@ def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[s
         "stop_distance_m": float("inf"),
         "light": "",
     }
+    scene["turn_ahead"] = ""
     if not in_junction:
         next_edge = route[route_index + 1] if route_index + 1 < len(route) else None
+        if next_edge is not None and net.links(lane.edge, next_edge):
+            scene["turn_ahead"] = net.direction(lane.edge, next_edge)
         good = set(net.lanes_to(lane.edge, next_edge)) if next_edge else {goal_lane}
         ids = net.edge_lanes[lane.edge]
         here = ids.index(lane_id)
@@ -209,5 +212,8 @@ def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[s
             scene["stop_distance_m"] = float(light[2])
     else:
         r[3] = 1.0
+        if light is not None:  # privileged only: the next light beyond the junction (R_t: none)
+            scene["light"] = light[3]
+            scene["stop_distance_m"] = float(light[2])
     r[9] = np.clip(speed / max(lane.speed, 1e-6), 0.0, 2.0)
     return r, scene

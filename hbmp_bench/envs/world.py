@@ -117,6 +117,7 @@ class DrivingWorld:
         self._ego = None
         self._light = None
         self._actors = None
+        self._followed_lane = ""
 
     # --------------------------------------------------------------- episode
     def start(self, episode: Episode, seed: int) -> tuple[dict, dict]:
@@ -145,11 +146,12 @@ class DrivingWorld:
             raise RuntimeError(f"SUMO did not insert the ego for {episode.key}")
         self.driver.reset(self._ego)
         self._ego = self.driver.observe(self._ego)
+        self._followed_lane = self._ego.lane
         self._last_xy = self._ego.xy
         self.goal_xy = self.net.position(episode.goal_lane, episode.goal_pos)
         self.detector = InfractionDetector(self.locator, self.goal_xy, episode.success_radius_m, episode.timeout_s)
-        self._route_offsets = np.concatenate([[0.0], np.cumsum([self.net.edge_length[e] for e in episode.route])])
-        self._route_pos = {e: i for i, e in enumerate(episode.route)}
+        self._set_route(episode.route)
+        self.reroutes = 0
         self._light = self.sim.light_ahead(EGO_ID)
         self._actors = self.sim.snapshot().without(EGO_ID)
         return self._observe(StepEvents())
@@ -211,9 +213,22 @@ class DrivingWorld:
         """(5,) int8: 1 where a behavior is feasible for R_t (lane changes need the target lane)."""
         return feasible_behaviors(self.net, self._ego.lane)
 
+    @property
+    def followed_lane(self) -> str:
+        """The ego's lane, or inside a junction the last lane before it.
+
+        Junction lanes overlap, and SUMO's map matching of a pose pushed with ``moveToXY`` may
+        pick any of them; the lane before the junction plus the route's next edges names the
+        connection the ego is actually following."""
+        return self._followed_lane
+
+    def _route_index(self) -> int:
+        """Index in ``self.route`` of the followed lane's edge (routes never repeat an edge)."""
+        return self._route_pos.get(self.net.lane(self._followed_lane).edge, 0) if self._followed_lane else 0
+
     def _next_edges(self, count: int = 3) -> tuple[str, ...]:
-        route, k = self.episode.route, min(self._ego.route_index, len(self.episode.route) - 1)
-        return route[k + 1: k + 1 + count]
+        k = self._route_index()
+        return self.route[k + 1: k + 1 + count]
 
     def step(self, behavior: int) -> tuple[dict, float, bool, bool, dict]:
         """Execute one behavior until it finishes or the episode ends.
@@ -221,7 +236,8 @@ class DrivingWorld:
         Returns (observation, reward, terminated, truncated, info); ``info["duration_s"]`` is the
         simulated time the behavior took.
         """
-        executed = self.driver.begin(behavior, self._ego, self._next_edges())
+        self._keep_route_reachable()
+        executed = self.driver.begin(behavior, self._ego, self._followed_lane, self._next_edges())
         self.decisions += 1
         total = StepEvents()
         start_time = self.sim.time
@@ -257,6 +273,8 @@ class DrivingWorld:
             return StepEvents()
         state = self.driver.observe(state)
         self._ego = state
+        if state.lane in self.net.lanes:
+            self._followed_lane = state.lane
         self.distance_m += float(np.hypot(*(state.xy - self._last_xy)))
         self._last_xy = state.xy
         self._update_progress(state)
@@ -281,12 +299,47 @@ class DrivingWorld:
         return ev
 
     def _update_progress(self, state) -> None:
+        """Progress [m] = route length − distance still to drive along the current route."""
         k = self._route_pos.get(self.net.lane(state.lane).edge) if state.lane in self.net.lanes else None
         if k is None:
             return
-        progress = self._route_offsets[k] + state.lane_pos - self.episode.start_pos
+        remaining = self._route_offsets[-2] + self.episode.goal_pos - (self._route_offsets[k] + state.lane_pos)
+        progress = self.episode.route_length_m - remaining
         if progress <= self.episode.route_length_m + 5.0:
             self.progress_m = max(self.progress_m, min(progress, self.episode.route_length_m))
+
+    def _set_route(self, route: tuple[str, ...]) -> None:
+        self.route = tuple(route)
+        self._route_offsets = np.concatenate([[0.0], np.cumsum([self.net.edge_length[e] for e in self.route])])
+        self._route_pos = {e: i for i, e in enumerate(self.route)}
+
+    def _keep_route_reachable(self) -> None:
+        """Re-plan the route when the followed lane cannot continue it.
+
+        A lane without a link onto the route's next edge (the ego is in a wrong lane at the stop
+        line) leads elsewhere; like a navigation system, the route is then re-planned from the
+        edge that lane leads to, so SUMO's route (which continuous fidelity maps the ego onto)
+        and R_t stay consistent. Costs the agent time and route completion, nothing else."""
+        lane = self._followed_lane
+        if lane not in self.net.lanes or self._ego.lane != lane:
+            return
+        edge = self.net.lane(lane).edge
+        k = self._route_pos.get(edge)
+        if k is None or k + 1 >= len(self.route) or lane in self.net.lanes_to(edge, self.route[k + 1]):
+            return
+        options = self.net.lane_next.get(lane, ())
+        if not options:
+            return
+        out_edge = options[0][1]
+        goal_edge = self.route[-1]
+        try:
+            onward = self.net.shortest_route(out_edge, goal_edge)
+        except (KeyError, ValueError):
+            return
+        new_route = (*self.route[:k + 1], *onward)
+        if self.sim.set_route(EGO_ID, new_route[k:] + self._continuation(goal_edge)):
+            self._set_route(new_route)
+            self.reroutes += 1
 
     def _terminal_reward(self, ev: StepEvents) -> float:
         r = TERMINAL_REWARD
@@ -302,12 +355,12 @@ class DrivingWorld:
     # ------------------------------------------------------------- observe
     def _observe(self, events: StepEvents) -> tuple[dict, dict]:
         ego, ep = self._ego, self.episode
-        route_index = min(ego.route_index, len(ep.route) - 1)
+        route_index = self._route_index()
         light = None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance, self._light.state)
-        road, scene = road_profile(self.net, ego.lane, ego.lane_pos, ep.route, route_index, ep.goal_lane, ego.speed, light)
+        road, scene = road_profile(self.net, ego.lane, ego.lane_pos, self.route, route_index, ep.goal_lane, ego.speed, light)
         actors = self._actors
         occupancy = self.observer.occupancy(
-            ego.xy, ego.yaw, ego.lane, ep.route[route_index + 1: route_index + 4],
+            ego.xy, ego.yaw, self._followed_lane or ego.lane, self.route[route_index + 1: route_index + 4],
             actors.xy, actors.yaw, actors.length, actors.width,
         )
         scene["goal_distance_m"] = float(np.hypot(*(ego.xy - self.goal_xy)))

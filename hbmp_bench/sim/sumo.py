@@ -312,9 +312,14 @@ class SumoSim:
         """Move to SUMO lane ``lane_index`` of the current edge in the next step."""
         libsumo.vehicle.changeLane(vehicle_id, int(lane_index), self.step_length)
 
-    def set_route(self, vehicle_id: str, route: tuple[str, ...] | list[str]) -> None:
-        """Replace a vehicle's route (must start with its current edge)."""
-        libsumo.vehicle.setRoute(vehicle_id, list(route))
+    def set_route(self, vehicle_id: str, route: tuple[str, ...] | list[str]) -> bool:
+        """Replace a vehicle's route (must start with its current edge); False if SUMO refuses
+        (e.g. the vehicle is inside a junction on a connection the route does not take)."""
+        try:
+            libsumo.vehicle.setRoute(vehicle_id, list(route))
+        except libsumo.TraCIException:
+            return False
+        return True
 
     def move_to_xy(self, vehicle_id: str, xy: np.ndarray, yaw: float, *, edge: str = "", lane_index: int = -1,
                    on_route: bool = True) -> None:

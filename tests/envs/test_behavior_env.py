@@ -82,7 +82,9 @@ def test_expert_clean_success_on_a_static_episode():
             break
     record = info["episode"]
     env.close()
-    assert record["success"] and reward == 100.0
+    parts = info["reward_components"]
+    assert record["success"] and parts["r_T"] == 100.0
+    assert reward == pytest.approx(parts["r_T"] + parts["r_k"]) and parts["r_k"] <= 0.0
     assert record["collision_vehicle"] + record["collision_pedestrian"] + record["wrong_lane"] + record["red_light"] + record["off_road"] == 0
     assert record["route_completion"] == 1.0
 

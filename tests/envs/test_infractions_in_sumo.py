@@ -39,19 +39,32 @@ def test_driving_through_red_is_detected():
     assert info["episode"]["red_light"] == total
 
 
-def test_driving_into_a_standing_car_is_one_collision():
-    env = BehaviorEnv(town="Town02", task="Straight", episode_index=0)
+def _speed_up_towards_a_standing_car(fidelity: str) -> tuple[int, dict]:
+    env = BehaviorEnv(town="Town02", task="Straight", episode_index=0, fidelity=fidelity)
     env.reset(seed=0)
     world = env.world
     ego = world.sim.vehicle_state(EGO_ID)
     lane = world.net.lane(ego.lane)
     world.sim.add_vehicle("blocker", (lane.edge,), lane_index=lane.index, pos=min(ego.lane_pos + 25.0, lane.length - 1.0), speed=0.0)
     libsumo.vehicle.setSpeed("blocker", 0.0)
-    collisions = 0
+    collisions, info = 0, {}
     for _ in range(150):
         _, reward, terminated, truncated, info = env.step(0)
         collisions += info["events"]["collision_vehicle"]
-        if terminated or truncated:
+        if terminated or truncated or info["time_s"] > 40.0:
             break
     env.close()
+    return collisions, info
+
+
+def test_driving_into_a_standing_car_is_one_collision():
+    """Event fidelity: SUMO follows speed_up into the car; the contact is counted once."""
+    collisions, _ = _speed_up_towards_a_standing_car("event")
     assert collisions == 1
+
+
+def test_the_motion_planner_does_not_drive_into_a_standing_car():
+    """Continuous fidelity: speed_up only raises v_ref; the planner's collision check brakes."""
+    collisions, info = _speed_up_towards_a_standing_car("continuous")
+    assert collisions == 0
+    assert info["scene"]["speed_mps"] < 0.5  # stopped behind it
