@@ -61,7 +61,7 @@ class BehaviorEnv(gym.Env):
     v0: first release.
     """
 
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(
         self,
@@ -78,8 +78,8 @@ class BehaviorEnv(gym.Env):
         density: str | None = None,
         render_mode: str | None = None,
     ):
-        if render_mode is not None:
-            raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None")
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None, 'rgb_array'")
         self.town = check_town(town)
         self.task = check_task(task)
         self.suite = get_suite(suite)
@@ -98,7 +98,10 @@ class BehaviorEnv(gym.Env):
             occupancy=spaces.Box(0.0, 1.0, (1, obs_cfg.rows, obs_cfg.cols), dtype=np.float32),
             road=spaces.Box(0.0, 2.0, (len(ROAD_FEATURES),), dtype=np.float32),
         )
-        self.render_mode = None
+        self.render_mode = render_mode
+        self._renderer = None
+        self._frames: list[np.ndarray] = []
+        self._last_behavior = ""
         self._world: DrivingWorld | None = None
         self._running = False
 
@@ -106,7 +109,36 @@ class BehaviorEnv(gym.Env):
     def world(self) -> DrivingWorld:
         if self._world is None:
             self._world = DrivingWorld(self.town, self.config)
+            if self.render_mode == "rgb_array":
+                self._world.on_substep = self._capture
         return self._world
+
+    # ------------------------------------------------------------- pictures
+    def _frame(self) -> np.ndarray:
+        if self._renderer is None:
+            from hbmp_bench.render import TopDownRenderer
+
+            self._renderer = TopDownRenderer(self.world.net)
+        w = self.world
+        caption = f"{w.town} {self.task}  t={w.sim.time:5.1f} s  {w._ego.speed:4.1f} m/s  {self._last_behavior}"
+        return self._renderer.frame(w.scene_view(caption))
+
+    def _capture(self) -> None:
+        self._frames.append(self._frame())
+
+    def render(self) -> np.ndarray | None:
+        """``rgb_array``: the top-down view now, (H, W, 3) uint8 (see :mod:`hbmp_bench.render`)."""
+        if self.render_mode is None:
+            return None
+        if not self._running and self._world is None:
+            raise RuntimeError("call reset() before render()")
+        return self._frames[-1] if self._frames else self._frame()
+
+    def drain_frames(self) -> list[np.ndarray]:
+        """All frames rendered at every 0.1 s simulation step since the last call (the frames
+        between decisions), oldest first; empty unless ``render_mode="rgb_array"``."""
+        frames, self._frames = self._frames, []
+        return frames
 
     def _pick_episode(self, options: dict | None):
         opts = options or {}
@@ -130,6 +162,9 @@ class BehaviorEnv(gym.Env):
         episode = self._pick_episode(options)
         obs, info = self.world.start(episode, seed=int(self.np_random.integers(2**31)))
         self._running = True
+        self._frames, self._last_behavior = [], ""
+        if self.render_mode == "rgb_array":
+            self._capture()
         return obs, info
 
     def step(self, action):
@@ -137,6 +172,7 @@ class BehaviorEnv(gym.Env):
             raise RuntimeError("call reset() before step() (and again after an episode ends)")
         if not self.action_space.contains(action) and not (isinstance(action, (int, np.integer)) and 0 <= int(action) < 5):
             raise ValueError(f"action must be an int in [0, {len(BEHAVIORS)}) ({', '.join(BEHAVIORS)}), got {action!r}")
+        self._last_behavior = BEHAVIORS[int(action)]
         obs, reward, terminated, truncated, info = self.world.step(int(action))
         if terminated or truncated:
             self._running = False

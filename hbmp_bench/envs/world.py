@@ -106,6 +106,8 @@ class DrivingWorld:
         else:
             self.driver = EventDriver(self.sim, self.net, EGO_ID, config.steps_per_decision, config.behavior)
         self.episode: Episode | None = None
+        self.on_substep = None
+        """Optional callable run after every simulation step (e.g. to render frames between decisions)."""
         self._reset_state()
 
     def _reset_state(self) -> None:
@@ -243,6 +245,8 @@ class DrivingWorld:
         start_time = self.sim.time
         while self.driver.before_step(self._planner_obstacles()):
             _accumulate(total, self._advance())
+            if self.on_substep is not None:
+                self.on_substep()
             if self.done_reason:
                 break
         obs, info = self._observe(total)
@@ -374,6 +378,23 @@ class DrivingWorld:
             "scene": scene,
         }
         return {"occupancy": occupancy, "road": road}, info
+
+    def scene_view(self, caption: str = ""):
+        """What a top-down picture of this instant needs (:class:`hbmp_bench.render.SceneView`)."""
+        from hbmp_bench.render.scene import SceneView
+
+        ego, actors, plan = self._ego, self._actors, self.driver.last_plan
+        return SceneView(
+            ego_xy=ego.xy, ego_yaw=ego.yaw, ego_length=EGO_TYPE.length, ego_width=EGO_TYPE.width,
+            ego_speed=ego.speed, actors_xy=actors.xy, actors_yaw=actors.yaw, actors_length=actors.length,
+            actors_width=actors.width, actors_is_pedestrian=actors.is_pedestrian,
+            light_states={k: v for k, v in self.sim.light_states().items() if k in self.net.lanes},
+            route_edges=self.route, goal_xy=self.goal_xy,
+            plan_trajectories=None if plan is None else plan.trajectories[:, :, :2],
+            plan_feasible=None if plan is None else plan.feasible,
+            plan_chosen=None if plan is None else plan.chosen,
+            time_s=self.sim.time, caption=caption,
+        )
 
     @property
     def route_completion(self) -> float:

@@ -1,0 +1,18 @@
+"""Pictures: a headless top-down renderer, episode GIFs and the planner figure.
+
+* :class:`SceneView` -- what to draw at one instant (world coordinates).
+* :class:`TopDownRenderer`, :class:`RenderConfig` -- ``SceneView`` -> RGB frame (H, W, 3) uint8.
+* :func:`write_gif`, :func:`write_video`, :func:`record_episode` -- frames to an animated GIF
+  (MP4 with imageio-ffmpeg); one recorded episode.
+* :func:`planner_figure` -- the motion planner's samples and costs per behavior (PNG).
+
+Commands: ``hbmp-bench record`` and ``hbmp-bench plot-planner`` (:mod:`.commands`).
+"""
+
+from hbmp_bench.render.planner_figure import planner_figure
+from hbmp_bench.render.scene import SIGNAL_STATES, SceneView
+from hbmp_bench.render.topdown import VIEWS, RenderConfig, TopDownRenderer, ViewTransform
+from hbmp_bench.render.video import record_episode, write_gif, write_video
+
+__all__ = ["SIGNAL_STATES", "VIEWS", "RenderConfig", "SceneView", "TopDownRenderer", "ViewTransform",
+           "planner_figure", "record_episode", "write_gif", "write_video"]
