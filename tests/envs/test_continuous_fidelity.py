@@ -1,0 +1,90 @@
+"""Continuous fidelity: the motion planner drives the ego in SUMO (real libsumo, shipped nets)."""
+
+import numpy as np
+import pytest
+
+from hbmp_bench.agents import load_agent
+from hbmp_bench.envs.behavior_env import BehaviorEnv
+from hbmp_bench.envs.world import EGO_ID, WorldConfig
+
+
+def _run(env, agent_name="expert", max_steps=400):
+    agent = load_agent(agent_name)
+    obs, info = env.reset(seed=0)
+    agent.reset(info)
+    infos = []
+    for _ in range(max_steps):
+        obs, reward, terminated, truncated, info = env.step(agent.act(obs, info))
+        infos.append((reward, info))
+        if terminated or truncated:
+            break
+    return infos
+
+
+def test_continuous_is_the_default_fidelity():
+    assert WorldConfig().fidelity == "continuous"
+    assert BehaviorEnv(town="Town01", task="Straight").config.fidelity == "continuous"
+    with pytest.raises(ValueError, match="fidelity"):
+        WorldConfig(fidelity="teleport")
+    with pytest.raises(ValueError, match="reward"):
+        WorldConfig(reward="shaped")
+
+
+@pytest.mark.slow
+def test_expert_reaches_the_goal_with_planner_rewards():
+    env = BehaviorEnv(town="Town01", task="Straight", episode_index=0)
+    steps = _run(env)
+    reward, info = steps[-1]
+    record = info["episode"]
+    env.close()
+    assert record["success"] and record["fidelity"] == "continuous"
+    assert record["collision_vehicle"] + record["wrong_lane"] + record["off_road"] + record["red_light"] == 0
+    durations = [i["duration_s"] for _, i in steps]
+    assert min(durations) > 0.1 and max(durations) <= 8.0 + 1e-6  # a behavior spans several 0.1 s steps
+    r_k = [i["reward_components"]["r_k"] for _, i in steps]
+    assert all(r <= 0.0 for r in r_k) and any(r < 0.0 for r in r_k)  # r_k = -c~_total
+    for r, i in steps:
+        assert r == pytest.approx(i["reward_components"]["r_k"] + i["reward_components"]["r_T"])
+    assert set(info["planner_costs"]) >= {"c_total", "c_velocity", "c_dist", "c_obs"}
+
+
+@pytest.mark.slow
+def test_sparse_reward_pays_r_T_only():
+    env = BehaviorEnv(town="Town01", task="Straight", episode_index=0, reward="sparse")
+    steps = _run(env, max_steps=5)
+    env.close()
+    for r, i in steps:
+        assert r == i["reward_components"]["r_T"]
+        assert i["reward_components"]["r_k"] <= 0.0
+
+
+@pytest.mark.slow
+def test_ego_pose_in_sumo_follows_the_vehicle_model():
+    """The model's pose is pushed into SUMO every step, so SUMO (and its traffic) see the ego there."""
+    import libsumo
+
+    env = BehaviorEnv(town="Town01", task="Straight", episode_index=0)
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(0)  # speed_up
+    world = env.world
+    model = world.driver.model
+    front = np.array(libsumo.vehicle.getPosition(EGO_ID))
+    centre = front - world.sim._dims[EGO_ID][0] / 2 * np.array([np.cos(model.yaw), np.sin(model.yaw)])
+    env.close()
+    assert model.v > 3.0
+    assert np.hypot(*(centre - model.xy)) < 0.5
+
+
+@pytest.mark.slow
+def test_render_returns_frames_between_decisions():
+    env = BehaviorEnv(town="Town01", task="Straight", episode_index=0, render_mode="rgb_array")
+    env.reset(seed=0)
+    first = env.drain_frames()
+    _, _, _, _, info = env.step(0)
+    frames = env.drain_frames()
+    image = env.render()
+    env.close()
+    assert len(first) == 1
+    assert len(frames) == round(info["duration_s"] / 0.1)  # one per 0.1 s simulation step
+    assert image.shape == (400, 400, 3) and image.dtype == np.uint8
