@@ -10,7 +10,7 @@ import sys
 from hbmp_bench.errors import UnknownNameError
 
 COMMAND_MODULES: tuple[str, ...] = ("hbmp_bench.render.commands", "hbmp_bench.transfer.commands",
-                                    "hbmp_bench.evaluation.commands", "hbmp_bench.training.commands")
+                                    "hbmp_bench.evaluation.commands", "hbmp_bench.training.commands", "hbmp_bench.bench")
 """Modules that add their own sub-commands: each has ``add_commands(subparsers)``, whose parsers
 set ``func`` (``args -> exit code``). Keeps each room's commands beside its code."""
 

@@ -36,11 +36,21 @@ SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = range(5)
 FIDELITIES = ("event", "continuous")
 
 
-def feasible_behaviors(net: RoadNetwork, lane_id: str) -> np.ndarray:
-    """(5,) int8 mask: 1 where a behavior is feasible on ``lane_id`` (lane changes need that lane)."""
+LANE_CHANGE_CUTOFF_M = 10.0
+"""No lane change starts within this distance of a lane's end [m]: the last metres before a
+junction (solid lines in real towns); a change begun there would enter the junction on another
+lane's connection."""
+
+
+def feasible_behaviors(net: RoadNetwork, lane_id: str, lane_pos: float | None = None) -> np.ndarray:
+    """(5,) int8 mask: 1 where a behavior is feasible on ``lane_id``: lane changes need that lane
+    and, when the front-bumper position ``lane_pos`` [m] is given, more than
+    :data:`LANE_CHANGE_CUTOFF_M` of the lane ahead."""
     mask = np.ones(5, dtype=np.int8)
     mask[CHANGE_LEFT] = net.neighbour_lane(lane_id, +1) is not None
     mask[CHANGE_RIGHT] = net.neighbour_lane(lane_id, -1) is not None
+    if lane_pos is not None and lane_id in net.lanes and net.lane(lane_id).length - lane_pos < LANE_CHANGE_CUTOFF_M:
+        mask[CHANGE_LEFT] = mask[CHANGE_RIGHT] = 0
     return mask
 
 
@@ -85,7 +95,7 @@ class EventDriver:
 
     def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...]) -> int:
         """Start ``behavior``; ``lane`` is the lane followed (SUMO's own lane in event fidelity)."""
-        executed = behavior if feasible_behaviors(self.net, state.lane)[behavior] else KEEP
+        executed = behavior if feasible_behaviors(self.net, state.lane, state.lane_pos)[behavior] else KEEP
         limit = self.net.lane(state.lane).speed
         self.sim.set_speed(self.vehicle_id, reference_speed(executed, state.speed, limit, self.behavior_config))
         if executed in (CHANGE_LEFT, CHANGE_RIGHT):
@@ -148,6 +158,8 @@ class ContinuousDriver:
     def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...]) -> int:
         """Start ``behavior`` on the centreline of ``lane`` continued along ``next_edges`` (in a
         junction: the lane before it, so the path runs through the route's own connection)."""
+        if not feasible_behaviors(self.net, state.lane, state.lane_pos)[behavior]:
+            behavior = KEEP
         refs = self.reference_paths(lane, tuple(next_edges))
         limit = self.net.lane(lane).speed
         return int(self.executor.start(behavior, self.model, refs, limit))

@@ -21,7 +21,7 @@ from hbmp_bench.metrics.geometry import LaneLocator
 from hbmp_bench.metrics.records import EpisodeRecord, driving_score
 from hbmp_bench.planning.behaviors import BehaviorConfig
 from hbmp_bench.scenarios import Episode, road_network
-from hbmp_bench.sim.sumo import EGO_TYPE, SumoSim
+from hbmp_bench.sim.sumo import EGO_TYPE, Actors, SumoSim
 
 EGO_ID = "ego"
 BEHAVIORS = ("speed_up", "speed_down", "change_left", "change_right", "keep")
@@ -40,6 +40,9 @@ is counted like a wrong lane). Each event pays once, when it happens."""
 
 
 REWARDS = ("dense", "sparse")
+CONTROLLED_SPACING_M = 12.0
+"""Least gap between two controlled vehicles inserted on the same lane [m] (SUMO delays an
+insertion onto an occupied place; a controlled vehicle must exist from the first step)."""
 
 
 @dataclass(frozen=True)
@@ -122,8 +125,12 @@ class DrivingWorld:
         self._followed_lane = ""
 
     # --------------------------------------------------------------- episode
-    def start(self, episode: Episode, seed: int) -> tuple[dict, dict]:
-        """Start ``episode`` with SUMO seed ``seed``; returns the first (observation, info)."""
+    def start(self, episode: Episode, seed: int, controlled: int = 0) -> tuple[dict, dict]:
+        """Start ``episode`` with SUMO seed ``seed``; returns the first (observation, info).
+
+        ``controlled``: background vehicles ``bg0``..``bg{controlled-1}`` are handed over to the
+        caller (multi-agent world) and inserted where nothing else stands, so all of them exist
+        after the first step; 0 (the single-ego env) leaves the traffic exactly as before."""
         if episode.town != self.town:
             raise ValueError(f"episode is in {episode.town}, world is {self.town}")
         self.episode = episode
@@ -141,7 +148,7 @@ class DrivingWorld:
         )
         self.sim.hand_over(EGO_ID)
         self.sim.set_speed(EGO_ID, 0.0)
-        self._spawn_traffic(rng, start_edge)
+        self._spawn_traffic(rng, start_edge, controlled)
         self.sim.step()
         self._ego = self.sim.vehicle_state(EGO_ID)
         if self._ego is None:
@@ -188,20 +195,32 @@ class DrivingWorld:
             total += dist[target]
         return route
 
-    def _spawn_traffic(self, rng: np.random.Generator, ego_edge: str) -> None:
+    def _spawn_traffic(self, rng: np.random.Generator, ego_edge: str, controlled: int = 0) -> None:
         traffic = self.episode.traffic
+        if controlled > traffic.vehicles:
+            raise ValueError(f"{controlled} controlled vehicles asked, the episode has {traffic.vehicles}")
         edges = [e for e in self.net.drivable_edges if e != ego_edge and self.net.edge_length[e] > 15.0]
+        taken: dict[str, list[float]] = {}
+        self.spawned_routes: dict[str, tuple[str, ...]] = {}
+        """Route each controlled background vehicle was inserted with."""
         for k in range(traffic.vehicles):
-            edge = edges[int(rng.integers(len(edges)))]
-            lane_ids = self.net.edge_lanes[edge]
-            lane = self.net.lanes[lane_ids[int(rng.integers(len(lane_ids)))]]
-            self.sim.add_vehicle(
-                f"bg{k}",
-                self._long_route(rng, edge),
-                lane_index=lane.index,
-                pos=float(rng.uniform(5.0, lane.length - 5.0)),
-                speed=0.0,
-            )
+            for _ in range(100):
+                edge = edges[int(rng.integers(len(edges)))]
+                lane_ids = self.net.edge_lanes[edge]
+                lane = self.net.lanes[lane_ids[int(rng.integers(len(lane_ids)))]]
+                route = self._long_route(rng, edge)
+                pos = float(rng.uniform(5.0, lane.length - 5.0))
+                if k >= controlled or all(abs(pos - p) > CONTROLLED_SPACING_M for p in taken.get(lane.id, ())):
+                    break
+            else:
+                raise RuntimeError(f"no free place for controlled vehicle bg{k} in {self.town}")
+            self.sim.add_vehicle(f"bg{k}", route, lane_index=lane.index, pos=pos, speed=0.0)
+            if k < controlled:
+                self.spawned_routes[f"bg{k}"] = tuple(route)
+                taken.setdefault(lane.id, []).append(pos)
+                self.sim.hand_over(f"bg{k}")
+                self.sim.track_lane(f"bg{k}")
+                self.sim.set_speed(f"bg{k}", 0.0)
         walkable = self.net.walkable_edges
         for k in range(traffic.pedestrians if walkable else 0):
             path = [walkable[int(rng.integers(len(walkable)))] for _ in range(5)]
@@ -213,7 +232,7 @@ class DrivingWorld:
     # ------------------------------------------------------------------ step
     def action_mask(self) -> np.ndarray:
         """(5,) int8: 1 where a behavior is feasible for R_t (lane changes need the target lane)."""
-        return feasible_behaviors(self.net, self._ego.lane)
+        return feasible_behaviors(self.net, self._ego.lane, self._ego.lane_pos)
 
     @property
     def followed_lane(self) -> str:
@@ -238,25 +257,44 @@ class DrivingWorld:
         Returns (observation, reward, terminated, truncated, info); ``info["duration_s"]`` is the
         simulated time the behavior took.
         """
-        self._keep_route_reachable()
-        executed = self.driver.begin(behavior, self._ego, self._followed_lane, self._next_edges())
-        self.decisions += 1
+        self.begin_behavior(behavior)
         total = StepEvents()
-        start_time = self.sim.time
-        while self.driver.before_step(self._planner_obstacles()):
-            _accumulate(total, self._advance())
+        while self.wants_step():
+            self.sim.step()
+            accumulate(total, self.after_sim_step(self.sim.snapshot()))
             if self.on_substep is not None:
                 self.on_substep()
             if self.done_reason:
                 break
-        obs, info = self._observe(total)
-        info["behavior"] = BEHAVIORS[behavior]
-        info["behavior_executed"] = BEHAVIORS[executed]
-        info["duration_s"] = round(self.sim.time - start_time, 6)
-        r_terminal = self._terminal_reward(total)
-        r_k = self.driver.behavior_reward()
+        return self.outcome(total, behavior_ended=True)
+
+    # The pieces of ``step``, also driven by the multi-agent world (:mod:`hbmp_bench.envs.multi`),
+    # which steps SUMO once for all agents between ``wants_step`` and ``after_sim_step``.
+    def begin_behavior(self, behavior: int) -> None:
+        """Start ``behavior`` (0..4) for the ego."""
+        self._keep_route_reachable()
+        self._behavior = behavior
+        self._executed = self.driver.begin(behavior, self._ego, self._followed_lane, self._next_edges())
+        self._behavior_start_s = self.sim.time
+        self.decisions += 1
+
+    def wants_step(self) -> bool:
+        """Let the driver plan one control period; False once the behavior has finished."""
+        return self.driver.before_step(self._planner_obstacles())
+
+    def outcome(self, events: StepEvents, behavior_ended: bool) -> tuple[dict, float, bool, bool, dict]:
+        """(observation, reward, terminated, truncated, info) after ``events`` happened.
+
+        r_T pays ``events``; r_k (dense reward) is paid only when the behavior has ended."""
+        obs, info = self._observe(events)
+        r_terminal = self._terminal_reward(events)
+        r_k = self.driver.behavior_reward() if behavior_ended else 0.0
+        if behavior_ended:
+            info["behavior"] = BEHAVIORS[self._behavior]
+            info["behavior_executed"] = BEHAVIORS[self._executed]
+            info["duration_s"] = round(self.sim.time - self._behavior_start_s, 6)
+            info["planner_costs"] = self.driver.behavior_costs()
         info["reward_components"] = {"r_k": r_k, "r_T": r_terminal}
-        info["planner_costs"] = self.driver.behavior_costs()
         reward = r_terminal + (r_k if self.config.reward == "dense" else 0.0)
         terminated = self.done_reason in ("goal", "violation", "collision", "left_network")
         truncated = self.done_reason == "timeout"
@@ -268,9 +306,9 @@ class DrivingWorld:
         a = self._actors
         return obstacles_from(a.xy, a.yaw, a.speed, a.length, a.width)
 
-    def _advance(self) -> StepEvents:
-        """One simulation step plus detection; sets ``done_reason`` when the episode ends."""
-        self.sim.step()
+    def after_sim_step(self, snapshot: Actors) -> StepEvents:
+        """Detection after one simulation step (``snapshot``: every actor now); sets
+        ``done_reason`` when the episode ends."""
         state = self.sim.vehicle_state(EGO_ID)
         if state is None or EGO_ID in self.sim.arrived_ids():
             self.done_reason = "left_network"
@@ -283,7 +321,7 @@ class DrivingWorld:
         self._last_xy = state.xy
         self._update_progress(state)
         self._light = self.sim.light_ahead(EGO_ID)
-        actors = self.sim.snapshot().without(EGO_ID)
+        actors = snapshot.without(EGO_ID)
         ev = self.detector.update(
             EgoFrame(state.xy, state.yaw, EGO_TYPE.length, EGO_TYPE.width,
                      None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance, self._light.state),
@@ -346,15 +384,7 @@ class DrivingWorld:
             self.reroutes += 1
 
     def _terminal_reward(self, ev: StepEvents) -> float:
-        r = TERMINAL_REWARD
-        return float(
-            r["goal"] * ev.goal_reached
-            + r["collision"] * ev.collisions
-            + r["timeout"] * (self.done_reason == "timeout")
-            + r["red_light"] * ev.red_light
-            + r["wrong_lane"] * ev.wrong_lane
-            + r["off_road"] * ev.off_road
-        )
+        return terminal_reward(ev, timed_out=self.done_reason == "timeout")
 
     # ------------------------------------------------------------- observe
     def _observe(self, events: StepEvents) -> tuple[dict, dict]:
@@ -423,7 +453,21 @@ class DrivingWorld:
         self.sim.close()
 
 
-def _accumulate(total: StepEvents, ev: StepEvents) -> None:
+def terminal_reward(ev: StepEvents, timed_out: bool = False) -> float:
+    """The paper's r_T of the events ``ev`` (see ``TERMINAL_REWARD``)."""
+    r = TERMINAL_REWARD
+    return float(
+        r["goal"] * ev.goal_reached
+        + r["collision"] * ev.collisions
+        + r["timeout"] * timed_out
+        + r["red_light"] * ev.red_light
+        + r["wrong_lane"] * ev.wrong_lane
+        + r["off_road"] * ev.off_road
+    )
+
+
+def accumulate(total: StepEvents, ev: StepEvents) -> None:
+    """Add the events ``ev`` into ``total`` in place (counts add, flags or)."""
     for f in dataclasses.fields(StepEvents):
         value = getattr(ev, f.name)
         merged = (getattr(total, f.name) or value) if isinstance(value, bool) else getattr(total, f.name) + value

@@ -1,33 +1,38 @@
-"""Run agents on episodes and collect records (one process here; pools in ``run_jobs``)."""
+"""Run agents on episodes and collect records.
+
+``run_job`` runs a job in this process (the agent shares the process with the simulation: for
+debugging and trusted agents). ``run_jobs`` runs jobs through the isolated ``EpisodePool``.
+"""
 
 from __future__ import annotations
 
 import dataclasses
 import time
 from collections.abc import Iterable
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 
-from hbmp_bench.agents import load_agent
-from hbmp_bench.envs.behavior_env import BehaviorEnv
 from hbmp_bench.metrics.records import EpisodeRecord
 
 
 @dataclass(frozen=True)
 class Job:
-    """Episodes of one (suite, town, task) for one agent."""
+    """Episodes of one (suite, town, task) for one agent; ``fidelity`` None is the env's default."""
 
     suite: str
     town: str
     task: str
     agent: str
     episodes: tuple[int, ...]
-    fidelity: str = "event"
+    fidelity: str | None = None
 
 
 def run_job(job: Job) -> tuple[list[EpisodeRecord], float, int]:
     """Run a job's episodes in this process; returns (records, wall seconds, decisions)."""
-    env = BehaviorEnv(town=job.town, task=job.task, suite=job.suite, fidelity=job.fidelity)
+    from hbmp_bench.agents import load_agent
+    from hbmp_bench.envs.behavior_env import BehaviorEnv
+
+    options = {} if job.fidelity is None else {"fidelity": job.fidelity}
+    env = BehaviorEnv(town=job.town, task=job.task, suite=job.suite, **options)
     agent = load_agent(job.agent)
     records, decisions = [], 0
     start = time.perf_counter()
@@ -47,27 +52,14 @@ def run_job(job: Job) -> tuple[list[EpisodeRecord], float, int]:
 
 
 def run_jobs(jobs: Iterable[Job], workers: int = 1, progress: bool = True) -> list[EpisodeRecord]:
-    """Run jobs in ``workers`` processes (libsumo: one simulation per process)."""
-    from tqdm import tqdm
+    """Run jobs' episodes in ``workers`` isolated slots (agent and simulation in their own processes);
+    records come back ordered like the jobs. A failing agent gives ``agent_error`` records."""
+    from hbmp_bench.evaluation.evaluate import iter_outcomes
+    from hbmp_bench.evaluation.tasks import EpisodeTask, default_fidelity
 
     jobs = list(jobs)
-    total = sum(len(j.episodes) for j in jobs)
-    records: list[EpisodeRecord] = []
-    bar = tqdm(total=total, unit="ep", disable=not progress)
-    if workers <= 1:
-        for job in jobs:
-            recs, _, _ = run_job(job)
-            records.extend(recs)
-            bar.update(len(recs))
-            bar.set_postfix(success=f"{sum(r.success for r in records) / len(records):.0%}")
-    else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            for fut in as_completed([pool.submit(run_job, j) for j in jobs]):
-                recs, _, _ = fut.result()
-                records.extend(recs)
-                bar.update(len(recs))
-                bar.set_postfix(success=f"{sum(r.success for r in records) / len(records):.0%}")
-    bar.close()
-    order = {(j.town, j.task): k for k, j in enumerate(jobs)}
-    records.sort(key=lambda r: (order.get((r.town, r.task), 0), r.episode))
-    return records
+    fidelity = default_fidelity()
+    tasks = [EpisodeTask(j.suite, j.town, j.task, i, j.agent, j.fidelity or fidelity) for j in jobs for i in j.episodes]
+    records = [o.record for o in iter_outcomes(tasks, workers=workers, progress=progress)]
+    order = {t.key: k for k, t in enumerate(tasks)}
+    return sorted(records, key=lambda r: order.get(r.key, len(order)))

@@ -1,8 +1,15 @@
-"""Metric detectors, episode records and pandas summaries."""
+"""Metric detectors, episode records and pandas summaries (reports: ``hbmp_bench.metrics.report``)."""
 
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents
 from hbmp_bench.metrics.geometry import LaneLocator
-from hbmp_bench.metrics.records import EpisodeRecord, append_record, driving_score, read_records
+from hbmp_bench.metrics.records import (
+    EpisodeRecord,
+    append_record,
+    driving_score,
+    latest_per_key,
+    read_records,
+    repair_records,
+)
 from hbmp_bench.metrics.summary import summarize, success_table
 
 __all__ = [
@@ -14,7 +21,9 @@ __all__ = [
     "StepEvents",
     "append_record",
     "driving_score",
+    "latest_per_key",
     "read_records",
+    "repair_records",
     "success_table",
     "summarize",
 ]

@@ -77,6 +77,8 @@ class LaneLocator:
         self.unit = ab / self.seg_len[:, None]
         self.lo = np.minimum(self.a, self.b) - self.half_width[:, None]
         self.hi = np.maximum(self.a, self.b) + self.half_width[:, None]
+        self._bounds = np.ascontiguousarray(np.concatenate([self.hi, -self.lo], axis=1))
+        """(M, 4) [hi_x, hi_y, -lo_x, -lo_y]: one comparison culls the segments far from the points."""
         self.lane_edge = np.array([net.lanes[n].edge for n in names])
         self.junctions = list(net.junction_shapes.values())
         self.junction_lo = np.array([j.min(0) for j in self.junctions]).reshape(-1, 2)
@@ -92,7 +94,7 @@ class LaneLocator:
         A point on a lane of ``prefer_edge`` (the ego's own edge) is assigned to it even where another
         lane lies under it in plan view (a ramp bridging a carriageway)."""
         p_lo, p_hi = points.min(0), points.max(0)
-        near = np.nonzero(np.all(self.hi >= p_lo, axis=1) & np.all(self.lo <= p_hi, axis=1))[0]
+        near = np.nonzero((self._bounds >= np.concatenate([p_lo, -p_hi])).all(axis=1))[0]
         lane = np.full(len(points), -1)
         direction = np.zeros((len(points), 2))
         if len(near):

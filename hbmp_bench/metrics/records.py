@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 
@@ -14,12 +15,24 @@ PENALTIES = {
 }
 """CARLA Leaderboard 1.0 infraction penalty factors (multiplied once per event)."""
 
+AGENT_ERROR = "agent_error"
+"""end_reason of an episode whose agent raised, hung past the decision timeout, died or returned
+an invalid action: a failed episode of that agent."""
+SIM_ERROR = "sim_error"
+"""end_reason of an episode the simulation could not finish (SUMO error, crash, watchdog) even
+after a retry: not the agent's fault; a resumed evaluation runs it again."""
+DECISION_CAP = "decision_cap"
+"""end_reason of an episode stopped after a fixed number of decisions (smoke runs)."""
+END_REASON_ERRORS = (AGENT_ERROR, SIM_ERROR, DECISION_CAP)
+
 
 @dataclass(frozen=True)
 class EpisodeRecord:
     """The outcome of one episode (the DESIGN contract's columns).
 
-    Distances in [m], durations in [s], counts are events (one per entry).
+    Distances in [m], durations in [s], counts are events (one per entry). ``end_reason`` is the
+    world's (``goal``, ``timeout``, ``collision``, ``violation``, ``left_network``) or one of
+    ``END_REASON_ERRORS`` set by the evaluation runner, with the reason in ``error``.
     """
 
     suite: str
@@ -45,10 +58,16 @@ class EpisodeRecord:
     decisions: int
     driving_score: float
     end_reason: str
+    error: str = ""
 
     @property
     def collisions(self) -> int:
         return self.collision_vehicle + self.collision_pedestrian + self.collision_other
+
+    @property
+    def key(self) -> tuple[str, str, str, int, str, str]:
+        """Identity of the episode run: (suite, town, task, episode, agent, fidelity)."""
+        return (self.suite, self.town, self.task, self.episode, self.agent, self.fidelity)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -71,6 +90,34 @@ def append_record(path: str | Path, record: EpisodeRecord) -> None:
         fh.write(line)
         fh.flush()
         os.fsync(fh.fileno())
+
+
+def repair_records(path: str | Path) -> int:
+    """Cut a torn last line (a kill mid-write) so the next append starts on a fresh line.
+
+    Returns the number of bytes removed (0 when the file is whole or missing).
+    """
+    path = Path(path)
+    if not path.exists():
+        return 0
+    with open(path, "rb+") as fh:
+        data = fh.read()
+        if not data or data.endswith(b"\n"):
+            return 0
+        keep = data.rfind(b"\n") + 1
+        fh.truncate(keep)
+        fh.flush()
+        os.fsync(fh.fileno())
+    return len(data) - keep
+
+
+def latest_per_key(records: Iterable[EpisodeRecord]) -> list[EpisodeRecord]:
+    """One record per ``EpisodeRecord.key``: the last one written wins (a rerun of a ``sim_error``
+    replaces it), in first-seen order."""
+    latest: dict[tuple, EpisodeRecord] = {}
+    for record in records:
+        latest[record.key] = record
+    return list(latest.values())
 
 
 def read_records(path: str | Path) -> list[EpisodeRecord]:

@@ -1,0 +1,136 @@
+"""Sub-commands ``evaluate``, ``report`` and ``leaderboard {submit,add,render}`` of ``hbmp-bench``."""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import json
+from pathlib import Path
+
+
+def _missing_extra_is_user_error(func):
+    """A missing optional dependency (the ray extra) becomes a ValueError: exit code 2 with its message."""
+
+    @functools.wraps(func)
+    def wrapper(args: argparse.Namespace) -> int:
+        try:
+            return func(args)
+        except ImportError as exc:
+            if "hbmp-bench[" not in str(exc):
+                raise
+            raise ValueError(str(exc)) from exc
+
+    return wrapper
+
+
+def _limits(args: argparse.Namespace):
+    from hbmp_bench.evaluation.tasks import RunnerLimits
+
+    return RunnerLimits(decision_timeout_s=args.decision_timeout, watchdog_s=args.watchdog)
+
+
+def _add_selection(p: argparse.ArgumentParser, agent_default: str | None) -> None:
+    p.add_argument("--suite", default="corl2017")
+    if agent_default is None:
+        p.add_argument("--agent", required=True, help="registry name, module:Class or checkpoint")
+    else:
+        p.add_argument("--agent", default=agent_default, help="registry name, module:Class or checkpoint")
+    p.add_argument("--towns", nargs="*", help="default: the suite's")
+    p.add_argument("--tasks", nargs="*", help="default: the suite's")
+    p.add_argument("--episodes", type=int, default=None, help="first N episodes per (town, task); default: all")
+    p.add_argument("--fidelity", default=None, help="world fidelity; default: the env's default (recorded)")
+    p.add_argument("--workers", type=int, default=None, help="parallel slots; default: one per core")
+    p.add_argument("--backend", default="process", help="process (default) or ray")
+    p.add_argument("--address", default=None, help="Ray cluster address; default: a local Ray instance")
+    p.add_argument("--decision-timeout", type=float, default=10.0, help="seconds per agent decision [s]")
+    p.add_argument("--watchdog", type=float, default=120.0, help="seconds without simulation progress [s]")
+    p.add_argument("--json", action="store_true", help="print a JSON summary (no progress bar)")
+
+
+@_missing_extra_is_user_error
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from hbmp_bench.evaluation.evaluate import evaluate
+    from hbmp_bench.metrics.report import records_frame, success_table
+    from hbmp_bench.metrics.summary import summarize
+
+    result = evaluate(args.suite, args.agent, towns=args.towns, tasks=args.tasks, episodes=args.episodes,
+                      fidelity=args.fidelity, out_dir=args.out, workers=args.workers, backend=args.backend,
+                      address=args.address, limits=_limits(args), progress=not args.json)
+    summary = {"records": str(result.path), "ran": result.ran, "skipped": result.skipped,
+               "missing": result.missing, "wall_s": round(result.wall_s, 2), **summarize(result.records)}
+    if args.json:
+        print(json.dumps(summary, indent=2))
+        return 0
+    if result.records:
+        print(success_table(records_frame(result.records)).to_string())
+    for key, value in summary.items():
+        print(f"{key:24s} {value}")
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from hbmp_bench.metrics.report import build_report, view_rows, write_report
+
+    rep = build_report(args.paths)
+    first = Path(args.paths[0])
+    out = Path(args.out) if args.out else (first if first.is_dir() else first.parent) / "report"
+    written = write_report(rep, out)
+    if args.json:
+        print(json.dumps({"written": [str(p) for p in written],
+                          **{name: view_rows(view) for name, view in rep.views.items()}}, indent=2))
+        return 0
+    for name, view in rep.views.items():
+        print(f"== {name}")
+        print(view.to_string() if not view.empty else "(no episodes)")
+        print()
+    print(f"written to {out}/ (CSV, markdown, failures.png, report.md)")
+    return 0
+
+
+@_missing_extra_is_user_error
+def _cmd_leaderboard(args: argparse.Namespace) -> int:
+    from hbmp_bench.evaluation import leaderboard
+
+    if args.leaderboard_cmd == "submit":
+        path, doc = leaderboard.submit(
+            args.suite, args.agent, board_dir=args.board_dir, towns=args.towns, tasks=args.tasks,
+            episodes=args.episodes, fidelity=args.fidelity, workers=args.workers, backend=args.backend,
+            address=args.address, limits=_limits(args), records_dir=args.records_dir, progress=not args.json)
+        info = {"results": str(path), "complete": doc["complete"], "subset": doc["subset"], **doc["summary"]}
+        print(json.dumps(info, indent=2) if args.json else "\n".join(f"{k:24s} {v}" for k, v in info.items()))
+        return 0
+    if args.leaderboard_cmd == "add":
+        print(f"added {leaderboard.add_results(args.file, args.board_dir)}")
+        return 0
+    if args.leaderboard_cmd == "render":
+        print(f"wrote {leaderboard.render_readme(args.board_dir, args.suite)}")
+        return 0
+    raise AssertionError(args.leaderboard_cmd)
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    """Add ``evaluate``, ``report`` and ``leaderboard`` to the ``hbmp-bench`` parser."""
+    p = sub.add_parser("evaluate", help="run an agent on a suite (towns x tasks), isolated and resumable")
+    _add_selection(p, agent_default="expert")
+    p.add_argument("--out", default="runs", help="folder of the records file <suite>__<agent>.jsonl (default: runs)")
+    p.set_defaults(func=_cmd_evaluate)
+
+    p = sub.add_parser("report", help="tables (CSV, markdown) and a failure bar chart from records")
+    p.add_argument("paths", nargs="+", metavar="DIR", help="records folders or .jsonl files (one result set each)")
+    p.add_argument("--out", default=None, help="output folder (default: <first DIR>/report)")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=_cmd_report)
+
+    p = sub.add_parser("leaderboard", help="submit an agent to a suite's leaderboard, add or render results")
+    lsub = p.add_subparsers(dest="leaderboard_cmd", required=True)
+    q = lsub.add_parser("submit", help="evaluate an agent and write leaderboards/<suite>/<agent>.json")
+    _add_selection(q, agent_default=None)
+    q.add_argument("--board-dir", default="leaderboards", help="leaderboard folder (default: leaderboards)")
+    q.add_argument("--records-dir", default=None, help="raw records (default: <board>/<suite>/runs/<hash>)")
+    q = lsub.add_parser("add", help="check a results file made elsewhere and add it to its board")
+    q.add_argument("file")
+    q.add_argument("--board-dir", default="leaderboards")
+    q = lsub.add_parser("render", help="regenerate <board>/<suite>/README.md")
+    q.add_argument("--suite", default="corl2017")
+    q.add_argument("--board-dir", default="leaderboards")
+    p.set_defaults(func=_cmd_leaderboard)

@@ -1,0 +1,224 @@
+"""The env process of an episode pool slot: it owns the simulation and asks the agent process for actions.
+
+Protocol with the pool (tuples on one duplex pipe):
+    pool → env  ``("run", EpisodeTask)`` or ``("stop", None)``;
+    env → pool  ``("beat", None)`` once started, then while an episode makes progress or waits
+                for the agent (about every 0.5 s), then ``("done", outcome dict)``.
+
+Every episode ends with exactly one ``done``: a finished episode, an ``agent_error`` (the agent
+raised, hung past ``decision_timeout_s``, died, or sent an invalid action) or a ``sim_error``
+(the env raised). After an error the outcome asks the pool to restart the slot (both processes),
+so a hung agent or a broken SUMO never serves the next episode.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import time
+import traceback
+from multiprocessing.connection import Connection
+from typing import Any
+
+from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, adopt_environment, watch_lifeline
+from hbmp_bench.metrics.records import AGENT_ERROR, DECISION_CAP, SIM_ERROR, EpisodeRecord
+
+BEAT_PERIOD_S = 0.5
+"""Least time between two heartbeats sent to the pool [s]."""
+
+
+class AgentFailure(Exception):
+    """The agent process raised, timed out, died or answered nonsense; the message says which."""
+
+
+def build_env(task: EpisodeTask, factory: str | None):
+    """The env of a task: ``BehaviorEnv`` or ``factory(town=, task=, suite=, fidelity=)``."""
+    if factory is None:
+        from hbmp_bench.envs.behavior_env import BehaviorEnv
+
+        make = BehaviorEnv
+    else:
+        module_name, _, attr = factory.partition(":")
+        make = getattr(importlib.import_module(module_name), attr)
+    return make(town=task.town, task=task.task, suite=task.suite, fidelity=task.fidelity)
+
+
+def blank_record(task: EpisodeTask, end_reason: str, error: str) -> EpisodeRecord:
+    """A failed record for an episode that produced no data (it never started)."""
+    from hbmp_bench import __version__
+    from hbmp_bench.scenarios import suite_episodes
+
+    try:
+        episode = suite_episodes(task.suite, task.town, task.task)[task.episode]
+        seed, length = episode.seed, episode.route_length_m
+    except Exception:  # noqa: BLE001 - the record must be written whatever broke
+        seed, length = -1, 0.0
+    return EpisodeRecord(
+        suite=task.suite, town=task.town, task=task.task, episode=task.episode, seed=seed, agent=task.agent,
+        package_version=__version__, fidelity=task.fidelity, success=False, route_completion=0.0,
+        collision_vehicle=0, collision_pedestrian=0, collision_other=0, wrong_lane=0, off_road=0, red_light=0,
+        timeout=False, duration_s=0.0, distance_m=0.0, route_length_m=length, decisions=0, driving_score=0.0,
+        end_reason=end_reason, error=error,
+    )
+
+
+def partial_record(env: Any, task: EpisodeTask, end_reason: str, error: str) -> EpisodeRecord:
+    """The record of a started episode cut short: what the world measured so far, never a success."""
+    world = getattr(getattr(env, "unwrapped", env), "world", None)
+    if world is None or getattr(world, "episode", None) is None:
+        return blank_record(task, end_reason, error)
+    record = world.record(task.agent)
+    return dataclasses.replace(record, success=False, timeout=False, end_reason=end_reason, error=error)
+
+
+class _AgentLink:
+    """The env side of the agent pipe, with timeouts on every answer; ``beat`` is called while
+    waiting so the pool's watchdog sees the env process alive."""
+
+    def __init__(self, conn: Connection, limits: RunnerLimits, beat):
+        self.conn = conn
+        self.limits = limits
+        self.beat = beat
+        self.ready = False
+
+    def _receive(self, timeout_s: float, what: str) -> tuple[str, Any]:
+        deadline = time.monotonic() + timeout_s
+        try:
+            while not self.conn.poll(min(BEAT_PERIOD_S, max(deadline - time.monotonic(), 0.0))):
+                if time.monotonic() >= deadline:
+                    raise AgentFailure(f"agent did not answer {what} within {timeout_s:g} s (hung or too slow); "
+                                       "the agent process was stopped")
+                self.beat()
+            return self.conn.recv()
+        except (EOFError, OSError, BrokenPipeError) as exc:
+            raise AgentFailure(f"agent process exited during {what} ({type(exc).__name__})") from None
+
+    def start(self) -> None:
+        if self.ready:
+            return
+        kind, payload = self._receive(self.limits.agent_start_timeout_s, "its start-up")
+        if kind != "ready":
+            raise AgentFailure(str(payload))
+        self.ready = True
+
+    def ask(self, message: tuple, what: str) -> Any:
+        try:
+            self.conn.send(message)
+        except (OSError, BrokenPipeError) as exc:
+            raise AgentFailure(f"agent process exited before {what} ({type(exc).__name__})") from None
+        kind, payload = self._receive(self.limits.decision_timeout_s, what)
+        if kind == "error":
+            raise AgentFailure(str(payload))
+        return payload
+
+
+class _EnvSlot:
+    """One env kept across episodes of the same (suite, town, task, fidelity)."""
+
+    def __init__(self, factory: str | None):
+        self.factory = factory
+        self.env = None
+        self.key: tuple | None = None
+
+    def get(self, task: EpisodeTask):
+        key = (task.suite, task.town, task.task, task.fidelity)
+        if key != self.key:
+            self.close()
+            self.env = build_env(task, self.factory)
+            self.key = key
+        return self.env
+
+    def close(self) -> None:
+        if self.env is not None:
+            self.env.close()
+        self.env, self.key = None, None
+
+
+def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits: RunnerLimits, beat) -> dict:
+    """Run one episode; returns the outcome dict sent to the pool (record, status, restart, timings)."""
+    times: list[float] = []
+
+    def outcome(record: EpisodeRecord, status: str, restart: bool) -> dict:
+        return {
+            "record": record.to_dict(), "status": status, "restart": restart,
+            "max_decision_s": max(times, default=0.0),
+            "mean_decision_s": sum(times) / len(times) if times else 0.0,
+        }
+
+    try:
+        agent.start()
+    except AgentFailure as exc:
+        return outcome(blank_record(task, AGENT_ERROR, str(exc)), AGENT_ERROR, True)
+    try:
+        env = env_slot.get(task)
+        beat(force=True)
+        obs, info = env.reset(seed=task.episode, options={"episode_index": task.episode})
+    except Exception:  # noqa: BLE001
+        return outcome(blank_record(task, SIM_ERROR, "env reset raised:\n" + traceback.format_exc(limit=-8)), SIM_ERROR, True)
+    beat(force=True)
+    n_actions = int(getattr(env.action_space, "n", 5))
+    try:
+        agent.ask(("reset", info), "reset()")
+    except AgentFailure as exc:
+        return outcome(partial_record(env, task, AGENT_ERROR, str(exc)), AGENT_ERROR, True)
+    decisions = 0
+    while True:
+        if limits.max_decisions is not None and decisions >= limits.max_decisions:
+            return outcome(partial_record(env, task, DECISION_CAP, ""), "ok", False)
+        start = time.perf_counter()
+        try:
+            action = agent.ask(("act", obs, info), f"act() at decision {decisions}")
+        except AgentFailure as exc:
+            return outcome(partial_record(env, task, AGENT_ERROR, str(exc)), AGENT_ERROR, True)
+        times.append(time.perf_counter() - start)
+        if not isinstance(action, int) or not 0 <= action < n_actions:
+            error = f"invalid action {action!r} at decision {decisions}: want an int in [0, {n_actions})"
+            return outcome(partial_record(env, task, AGENT_ERROR, error), AGENT_ERROR, False)
+        try:
+            obs, _, terminated, truncated, info = env.step(action)
+        except Exception:  # noqa: BLE001
+            error = f"env step raised at decision {decisions}:\n" + traceback.format_exc(limit=-8)
+            return outcome(blank_record(task, SIM_ERROR, error), SIM_ERROR, True)
+        decisions += 1
+        beat()
+        if terminated or truncated:
+            record = dataclasses.replace(EpisodeRecord(**info["episode"]), agent=task.agent)
+            return outcome(record, "ok", False)
+
+
+def env_main(pool_conn: Connection, agent_conn: Connection, limits: RunnerLimits, lifeline: Connection,
+             environ: dict[str, str] | None = None) -> None:
+    """Entry point of the env process (started by the episode pool with the caller's ``environ``;
+    it exits when ``lifeline`` closes)."""
+    watch_lifeline(lifeline)
+    adopt_environment(environ)
+    import hbmp_bench.envs.behavior_env  # noqa: F401  (imported before the first heartbeat)
+
+    env_slot = _EnvSlot(limits.env_factory)
+    last_beat = [time.monotonic()]
+
+    def beat(force: bool = False) -> None:
+        now = time.monotonic()
+        if force or now - last_beat[0] >= BEAT_PERIOD_S:
+            pool_conn.send(("beat", None))
+            last_beat[0] = now
+
+    agent = _AgentLink(agent_conn, limits, beat)
+    beat(force=True)
+
+    try:
+        while True:
+            try:
+                kind, payload = pool_conn.recv()
+            except (EOFError, OSError):
+                return
+            if kind != "run":
+                return
+            pool_conn.send(("done", run_episode(payload, env_slot, agent, limits, beat)))
+    except (BrokenPipeError, OSError):
+        return
+    finally:
+        try:
+            env_slot.close()
+        except Exception:  # noqa: BLE001 - closing a broken SUMO must not mask the exit
+            pass

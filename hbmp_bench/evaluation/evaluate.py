@@ -1,0 +1,154 @@
+"""Resumable suite evaluation: every episode of a selection, records appended as episodes finish.
+
+The records file is append-only JSON lines, one line per finished episode, written (and fsynced)
+the moment the episode's outcome arrives. Running the same evaluation again skips every episode
+whose record is already there, keyed by (suite, town, task, episode, agent, fidelity), so a
+killed run loses at most the episodes in flight and never counts one twice. A torn last line is
+cut before appending. Episodes recorded as ``sim_error`` are run again on resume (the last record
+of a key wins when reading).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from hbmp_bench.errors import UnknownNameError
+from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool
+from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, agent_slug, suite_tasks
+from hbmp_bench.metrics.records import SIM_ERROR, EpisodeRecord, append_record, latest_per_key, read_records, repair_records
+
+BACKENDS = ("process", "ray")
+"""``process``: an ``EpisodePool`` on this machine; ``ray``: Ray actors (local or a cluster)."""
+
+
+@dataclass(frozen=True)
+class EvaluationResult:
+    """What an evaluation left behind.
+
+    Attributes:
+        path: the JSON-lines records file.
+        records: the selection's records (one per episode, the latest), in suite order.
+        ran / skipped: episodes run by this call / found already finished in the file.
+        wall_s: wall time of this call [s].
+        missing: selected episodes with no record (the run was interrupted).
+    """
+
+    path: Path
+    records: tuple[EpisodeRecord, ...]
+    ran: int
+    skipped: int
+    wall_s: float
+    missing: int
+
+
+def records_path(out_dir: str | os.PathLike, suite: str, agent: str) -> Path:
+    """``<out_dir>/<suite>__<agent slug>.jsonl``."""
+    return Path(out_dir) / f"{suite}__{agent_slug(agent)}.jsonl"
+
+
+def iter_outcomes(
+    tasks: Sequence[EpisodeTask],
+    *,
+    workers: int | None = None,
+    backend: str = "process",
+    address: str | None = None,
+    limits: RunnerLimits | None = None,
+    progress: bool = True,
+) -> Iterator[EpisodeOutcome]:
+    """Outcomes of ``tasks`` as they finish, with a progress bar showing the running success rate.
+
+    Args:
+        workers: parallel slots (default: one per core for ``process``, the cluster's CPUs for ``ray``).
+        backend: one of ``BACKENDS``; ``address`` is the Ray cluster (None: a local instance).
+    """
+    from tqdm import tqdm
+
+    if backend not in BACKENDS:
+        raise UnknownNameError("backend", backend, BACKENDS)
+    if workers is not None and workers <= 0:
+        raise ValueError(f"workers must be > 0, got {workers}")
+    limits = limits or RunnerLimits()
+    if not tasks:
+        return
+    successes = 0
+    with tqdm(total=len(tasks), unit="ep", disable=not progress) as bar:
+        if backend == "ray":
+            from hbmp_bench.evaluation.ray_backend import ray_imap
+
+            source = ray_imap(tasks, limits, workers=workers, address=address)
+        else:
+            pool = EpisodePool(min(workers or os.cpu_count() or 1, len(tasks)), limits)
+            source = pool_imap(pool, tasks)
+        for n, outcome in enumerate(source, start=1):
+            successes += outcome.record.success
+            bar.update(1)
+            bar.set_postfix(success=f"{successes / n:.0%}")
+            yield outcome
+
+
+def pool_imap(pool: EpisodePool, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
+    """``pool.imap`` that closes the pool when done or abandoned."""
+    with pool:
+        yield from pool.imap(tasks)
+
+
+def evaluate(
+    suite: str,
+    agent: str,
+    *,
+    towns: Sequence[str] | None = None,
+    tasks: Sequence[str] | None = None,
+    episodes: int | Iterable[int] | None = None,
+    fidelity: str | None = None,
+    out_dir: str | os.PathLike = "runs",
+    path: str | os.PathLike | None = None,
+    workers: int | None = None,
+    backend: str = "process",
+    address: str | None = None,
+    limits: RunnerLimits | None = None,
+    progress: bool = True,
+    check_agent: bool = True,
+) -> EvaluationResult:
+    """Evaluate ``agent`` on a suite selection, resuming from the records file.
+
+    Args:
+        suite / towns / tasks / episodes / fidelity: the selection (see ``suite_tasks``).
+        out_dir: folder of the records file ``<suite>__<agent>.jsonl``; ``path`` overrides the file.
+        workers / backend / address: see ``iter_outcomes``.
+        limits: timeouts, watchdog and retries; ``max_decisions`` is refused (capped episodes
+            are no evaluation).
+        check_agent: build the agent once here first, so a bad name fails before any episode.
+    """
+    limits = limits or RunnerLimits()
+    if limits.max_decisions is not None:
+        raise ValueError("evaluate runs whole episodes: limits.max_decisions must be None")
+    if backend not in BACKENDS:
+        raise UnknownNameError("backend", backend, BACKENDS)
+    selection = suite_tasks(suite, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity)
+    if check_agent:
+        from hbmp_bench.agents import load_agent
+
+        load_agent(agent)
+    path = Path(path) if path is not None else records_path(out_dir, selection[0].suite, agent)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    repair_records(path)
+    finished = {r.key for r in _read(path) if r.end_reason != SIM_ERROR}
+    todo = [t for t in selection if t.key not in finished]
+    start = time.perf_counter()
+    ran = 0
+    for outcome in iter_outcomes(todo, workers=workers, backend=backend, address=address, limits=limits,
+                                 progress=progress):
+        append_record(path, outcome.record)
+        ran += 1
+    wanted = {t.key: k for k, t in enumerate(selection)}
+    records = sorted((r for r in _read(path) if r.key in wanted), key=lambda r: wanted[r.key])
+    return EvaluationResult(path, tuple(records), ran, len(selection) - len(todo), time.perf_counter() - start,
+                            len(selection) - len(records))
+
+
+def _read(path: Path) -> list[EpisodeRecord]:
+    return latest_per_key(read_records(path)) if path.exists() else []

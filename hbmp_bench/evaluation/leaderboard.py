@@ -1,0 +1,268 @@
+"""Leaderboards kept as files: ``<board>/<suite>/<agent>.json`` results and a generated README.
+
+A submission evaluates an agent on a suite (resumable, see ``evaluate``) and writes a results
+file with the per-episode records, the aggregate scores and provenance (package and library
+versions, git commit, suite definition hash, seeds, date, machine, fidelity, wall time). The
+suite's ``README.md`` is then regenerated: a ranked table per fidelity.
+
+Rules:
+- Only *complete* entries are ranked: every episode of the official suite (all towns, tasks and
+  episodes) with no ``sim_error`` left. A run on a subset (``towns``/``tasks``/``episodes``) is
+  written as ``<agent>.subset.json`` and listed under "Partial runs (not ranked)"; it never
+  replaces a full entry.
+- A results file whose suite definition hash differs from the installed suite's is refused
+  (``StaleResultsError``) when it is added and when the README is generated: its episodes are not
+  the current suite's.
+- Entries are ranked by success %, then driving score.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+from hbmp_bench import __version__
+from hbmp_bench.evaluation.evaluate import evaluate
+from hbmp_bench.evaluation.provenance import git_commit, library_versions, machine_description, utc_now
+from hbmp_bench.evaluation.tasks import RunnerLimits, agent_slug, suite_tasks
+from hbmp_bench.metrics import report
+from hbmp_bench.metrics.records import SIM_ERROR, EpisodeRecord
+from hbmp_bench.metrics.summary import summarize
+from hbmp_bench.scenarios import TASK_LABELS, TASKS, get_suite
+
+RESULTS_FORMAT = 1
+"""Version of the results file layout."""
+
+EPISODE_COLUMNS = (
+    "town", "task", "episode", "seed", "success", "route_completion", "driving_score", "collision_vehicle",
+    "collision_pedestrian", "collision_other", "wrong_lane", "off_road", "red_light", "timeout", "duration_s",
+    "distance_m", "route_length_m", "decisions", "end_reason", "error",
+)
+"""Per-episode fields kept in a results file."""
+
+
+class StaleResultsError(ValueError):
+    """A results file made for another definition of its suite."""
+
+
+def entry_path(board_dir: str | os.PathLike, suite: str, agent: str, subset: bool) -> Path:
+    """``<board>/<suite>/<agent slug>.json`` (``.subset.json`` for partial runs)."""
+    return Path(board_dir) / suite / f"{agent_slug(agent)}{'.subset' if subset else ''}.json"
+
+
+def runs_dir(board_dir: str | os.PathLike, suite: str) -> Path:
+    """Where submissions keep their raw JSON-lines records (ignored by git; resumable):
+    ``<board>/<suite>/runs/<suite hash>``, so records of an older suite definition never mix in."""
+    return Path(board_dir) / suite / "runs" / get_suite(suite).definition_hash()
+
+
+def results_document(
+    suite: str,
+    agent: str,
+    records: Sequence[EpisodeRecord],
+    *,
+    towns: Sequence[str],
+    tasks: Sequence[str],
+    episodes: Sequence[int],
+    fidelity: str,
+    wall_s: float | None = None,
+    workers: int | None = None,
+    backend: str = "process",
+) -> dict:
+    """The results file content for ``records`` of a selection of ``suite``."""
+    spec = get_suite(suite)
+    full = (set(towns) == set(spec.towns) and set(tasks) == set(spec.tasks)
+            and list(episodes) == list(range(spec.episodes_per_task)))
+    expected = len(towns) * len(tasks) * len(episodes)
+    sim_errors = sum(r.end_reason == SIM_ERROR for r in records)
+    frame = report.records_frame(records, label=agent) if records else None
+    aggregates = {}
+    if frame is not None:
+        aggregates = {name: report.view_rows(view) for name, view in report.build_report(frame).views.items()}
+        per_task = report.scored(frame).groupby("task")["success"].mean() * 100.0
+        aggregates["success_pct_by_task"] = {t: round(float(per_task[t]), 1) for t in TASKS if t in per_task.index}
+    scored_records = [r for r in records if r.end_reason not in report.EXCLUDED]
+    summary = summarize(scored_records)
+    km = float(sum(r.distance_m for r in scored_records)) / 1000.0
+    events = sum(r.collisions + r.wrong_lane + r.off_road + r.red_light for r in scored_records)
+    summary["success_pct"] = round(100.0 * summary["success_rate"], 2)
+    summary["km_per_infraction"] = round(km / events, 3) if events else None
+    return {
+        "format": RESULTS_FORMAT,
+        "suite": spec.name,
+        "suite_hash": spec.definition_hash(),
+        "agent": agent,
+        "fidelity": fidelity,
+        "complete": full and len(records) == expected and sim_errors == 0,
+        "subset": not full,
+        "selection": {"towns": list(towns), "tasks": list(tasks), "episodes": list(episodes)},
+        "expected_episodes": expected,
+        "sim_errors": sim_errors,
+        "summary": summary,
+        "aggregates": aggregates,
+        "episodes": [{k: r.to_dict()[k] for k in EPISODE_COLUMNS} for r in records],
+        "provenance": {
+            "package_version": __version__,
+            "git_commit": git_commit(),
+            "suite_definition_hash": spec.definition_hash(),
+            "seeds": {"suite_seed": spec.seed, "reset_seed": "episode index",
+                      "episode_seeds": "per episode in 'episodes'"},
+            "date_utc": utc_now(),
+            "machine": machine_description(),
+            "libraries": library_versions(),
+            "fidelity": fidelity,
+            "workers": workers,
+            "backend": backend,
+            "wall_time_s": None if wall_s is None else round(wall_s, 1),
+        },
+    }
+
+
+def check_results(doc: dict, source: str = "results") -> dict:
+    """``doc`` if it is a results file of the installed suite; else a clear error."""
+    if not isinstance(doc, dict) or doc.get("format") != RESULTS_FORMAT or "suite" not in doc:
+        raise ValueError(f"{source} is not a leaderboard results file (format {RESULTS_FORMAT})")
+    current = get_suite(doc["suite"]).definition_hash()
+    if doc.get("suite_hash") != current:
+        raise StaleResultsError(
+            f"{source} was made for suite {doc['suite']!r} with definition hash {doc.get('suite_hash')!r}, but the "
+            f"installed {doc['suite']!r} hashes to {current!r}: its episodes are not the current suite's. Rerun the "
+            f"submission (hbmp-bench leaderboard submit --suite {doc['suite']} --agent {doc.get('agent')}) or remove the file."
+        )
+    return doc
+
+
+def write_json(path: Path, doc: dict) -> Path:
+    """Write a results document to ``path`` (one line per episode, so diffs stay readable) through a
+    temporary file and a rename."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    head = json.dumps({k: v for k, v in doc.items() if k != "episodes"}, indent=1, allow_nan=False)
+    rows = ",\n".join("  " + json.dumps(e, allow_nan=False) for e in doc.get("episodes", []))
+    text = head[:-2] + ',\n "episodes": [\n' + rows + "\n ]\n}\n"
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+    return path
+
+
+def load_entries(board_dir: str | os.PathLike, suite: str) -> list[dict]:
+    """Every results file of a suite's board, checked (a stale one raises ``StaleResultsError``)."""
+    folder = Path(board_dir) / get_suite(suite).name
+    entries = []
+    for path in sorted(folder.glob("*.json")):
+        doc = check_results(json.loads(path.read_text(encoding="utf-8")), str(path))
+        if doc["suite"] != get_suite(suite).name:
+            raise ValueError(f"{path} holds results of suite {doc['suite']!r}, not {suite!r}")
+        entries.append(doc | {"_file": path.name})
+    return entries
+
+
+def _rank_key(doc: dict) -> tuple:
+    return (-doc["summary"].get("success_pct", 0.0), -doc["summary"].get("mean_driving_score", 0.0), doc["agent"])
+
+
+def _row(doc: dict, rank: str) -> list[str]:
+    s, prov = doc["summary"], doc["provenance"]
+    by_task = doc["aggregates"].get("success_pct_by_task", {})
+    km = s.get("km_per_infraction")
+    return [
+        rank, f"`{doc['agent']}`", f"{s.get('success_pct', 0.0):.1f}",
+        *(f"{by_task[t]:.1f}" if t in by_task else "–" for t in TASKS),
+        f"{s.get('mean_driving_score', 0.0):.1f}", f"{100.0 * s.get('mean_route_completion', 0.0):.1f}",
+        "∞" if km is None else f"{km:.2f}", str(s.get("episodes", 0)),
+        prov.get("package_version") or "", (prov.get("git_commit") or "")[:10], (prov.get("date_utc") or "")[:10],
+        "" if prov.get("wall_time_s") is None else f"{prov['wall_time_s']:.0f}",
+    ]
+
+
+HEADER = ["rank", "agent", "success %", *(TASK_LABELS[t] + " %" for t in TASKS), "driving score",
+          "route completion %", "km / infraction", "episodes", "version", "commit", "date", "wall s"]
+
+
+def _table(rows: Iterable[list[str]]) -> str:
+    lines = ["| " + " | ".join(HEADER) + " |", "|" + "|".join("---" for _ in HEADER) + "|"]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
+    """Regenerate ``<board>/<suite>/README.md`` from the suite's results files."""
+    spec = get_suite(suite)
+    entries = load_entries(board_dir, spec.name)
+    ranked = [e for e in entries if e["complete"]]
+    partial = [e for e in entries if not e["complete"]]
+    parts = [
+        f"# Leaderboard: {spec.name}\n",
+        f"{spec.description}\n",
+        f"Suite definition hash `{spec.definition_hash()}`: {len(spec.towns)} towns × {len(spec.tasks)} tasks × "
+        f"{spec.episodes_per_task} episodes. Generated from the `*.json` results files by "
+        f"`hbmp-bench leaderboard render --suite {spec.name}`; do not edit by hand. Ranked by success %, then "
+        "driving score (CARLA Leaderboard, 0–100); km / infraction counts collisions, wrong lane, off-road and "
+        "red lights; wall s is the submission's wall time with its `workers` (see each results file).\n",
+    ]
+    if not ranked:
+        parts.append("No complete entries yet.\n")
+    for fidelity in sorted({e["fidelity"] for e in ranked}):
+        group = sorted((e for e in ranked if e["fidelity"] == fidelity), key=_rank_key)
+        parts.append(f"## Fidelity: {fidelity}\n")
+        parts.append(_table(_row(e, str(k)) for k, e in enumerate(group, start=1)))
+    if partial:
+        parts.append("## Partial runs (not ranked)\n")
+        parts.append("Subsets of the suite, or runs with missing or errored episodes.\n")
+        parts.append(_table(_row(e, "–") for e in sorted(partial, key=_rank_key)))
+    path = Path(board_dir) / spec.name / "README.md"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text("\n".join(parts), encoding="utf-8")
+    os.replace(tmp, path)
+    return path
+
+
+def add_results(path: str | os.PathLike, board_dir: str | os.PathLike) -> Path:
+    """Check a results file made elsewhere and install it on its suite's board; returns its new path."""
+    source = Path(path)
+    doc = check_results(json.loads(source.read_text(encoding="utf-8")), str(source))
+    target = entry_path(board_dir, doc["suite"], doc["agent"], doc["subset"])
+    write_json(target, {k: v for k, v in doc.items() if not k.startswith("_")})
+    render_readme(board_dir, doc["suite"])
+    return target
+
+
+def submit(
+    suite: str,
+    agent: str,
+    *,
+    board_dir: str | os.PathLike = "leaderboards",
+    towns: Sequence[str] | None = None,
+    tasks: Sequence[str] | None = None,
+    episodes: int | Iterable[int] | None = None,
+    fidelity: str | None = None,
+    workers: int | None = None,
+    backend: str = "process",
+    address: str | None = None,
+    limits: RunnerLimits | None = None,
+    records_dir: str | os.PathLike | None = None,
+    progress: bool = True,
+) -> tuple[Path, dict]:
+    """Evaluate ``agent`` on ``suite`` (or a subset), write its results file and regenerate the README.
+
+    The raw records go to ``records_dir`` (default ``runs_dir(board_dir, suite)``), so an
+    interrupted submission resumes where it stopped. Returns (results path, results document).
+    """
+    spec = get_suite(suite)
+    load_entries(board_dir, spec.name)  # refuse before a long run if the board holds stale files
+    selection = suite_tasks(spec.name, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity)
+    result = evaluate(spec.name, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity,
+                      out_dir=records_dir or runs_dir(board_dir, spec.name), workers=workers, backend=backend,
+                      address=address, limits=limits, progress=progress)
+    doc = results_document(
+        spec.name, agent, result.records,
+        towns=list(dict.fromkeys(t.town for t in selection)), tasks=list(dict.fromkeys(t.task for t in selection)),
+        episodes=sorted({t.episode for t in selection}), fidelity=selection[0].fidelity,
+        wall_s=result.wall_s if result.skipped == 0 else None, workers=workers or os.cpu_count(), backend=backend,
+    )
+    path = write_json(entry_path(board_dir, spec.name, agent, doc["subset"]), doc)
+    render_readme(board_dir, spec.name)
+    return path, doc

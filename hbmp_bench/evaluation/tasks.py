@@ -1,0 +1,156 @@
+"""What the evaluation runner runs: one episode per task, and the limits it runs them under."""
+
+from __future__ import annotations
+
+import inspect
+import os
+import re
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+from hbmp_bench.scenarios import TASKS, check_task, check_town, get_suite
+
+
+@dataclass(frozen=True)
+class EpisodeTask:
+    """One episode of a suite for one agent.
+
+    Attributes:
+        suite / town / task / episode: which episode (``episode`` indexes the suite's list and is
+            also the reset seed, so every agent meets the same traffic).
+        agent: registry name, ``module:Class`` or checkpoint spec given to ``load_agent``.
+        fidelity: the resolved world fidelity (never None here; see ``default_fidelity``).
+    """
+
+    suite: str
+    town: str
+    task: str
+    episode: int
+    agent: str
+    fidelity: str
+
+    @property
+    def key(self) -> tuple[str, str, str, int, str, str]:
+        """The same tuple as ``EpisodeRecord.key`` of its record."""
+        return (self.suite, self.town, self.task, self.episode, self.agent, self.fidelity)
+
+    @property
+    def label(self) -> str:
+        return f"{self.town}/{self.task}/{self.episode}"
+
+
+@dataclass(frozen=True)
+class RunnerLimits:
+    """Time limits and fault handling of isolated episode runs.
+
+    Attributes:
+        decision_timeout_s: longest the agent may take for one ``act`` (or ``reset``) [s]; past
+            it the agent process is killed and the episode fails with ``agent_error``.
+        agent_start_timeout_s: longest the agent process may take to import and build the agent [s].
+        start_timeout_s: longest a fresh env process may take to start and report [s].
+        watchdog_s: longest the env process may go without a heartbeat [s]. It beats at least
+            every 0.5 s, also while it waits for the agent, so only a hung simulation (a SUMO
+            step, reset or start) trips it; the env process is then killed and the episode retried.
+        retries: reruns of an episode after a simulation error (crash, exception, watchdog).
+        max_decisions: stop every episode after this many decisions (``decision_cap``; smoke
+            runs); None runs episodes to their end.
+        env_factory: ``module:callable`` building the env from ``(town=, task=, suite=,
+            fidelity=)``; None is ``BehaviorEnv``. For wrappers and fault-injection tests.
+    """
+
+    decision_timeout_s: float = 10.0
+    agent_start_timeout_s: float = 120.0
+    start_timeout_s: float = 120.0
+    watchdog_s: float = 120.0
+    retries: int = 1
+    max_decisions: int | None = None
+    env_factory: str | None = None
+
+    def __post_init__(self):
+        for name in ("decision_timeout_s", "agent_start_timeout_s", "start_timeout_s", "watchdog_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if self.retries < 0:
+            raise ValueError(f"retries must be >= 0, got {self.retries}")
+        if self.max_decisions is not None and self.max_decisions <= 0:
+            raise ValueError(f"max_decisions must be > 0 or None, got {self.max_decisions}")
+        if self.env_factory is not None and ":" not in self.env_factory:
+            raise ValueError(f"env_factory must be 'module:callable', got {self.env_factory!r}")
+
+
+def default_fidelity() -> str:
+    """The fidelity ``BehaviorEnv`` uses when none is given (recorded with every episode)."""
+    from hbmp_bench.envs.behavior_env import BehaviorEnv
+    from hbmp_bench.envs.world import WorldConfig
+
+    default = inspect.signature(BehaviorEnv).parameters["fidelity"].default
+    return default if isinstance(default, str) else WorldConfig().fidelity
+
+
+def agent_slug(agent: str) -> str:
+    """A file-name-safe form of an agent spec (``my_pkg.mod:Agent`` → ``my_pkg.mod.Agent``)."""
+    slug = re.sub(r"[^A-Za-z0-9._-]+", ".", agent).strip(".")
+    if not slug:
+        raise ValueError(f"agent spec {agent!r} has no usable name")
+    return slug
+
+
+def suite_tasks(
+    suite: str,
+    agent: str,
+    *,
+    towns: Sequence[str] | None = None,
+    tasks: Sequence[str] | None = None,
+    episodes: int | Iterable[int] | None = None,
+    fidelity: str | None = None,
+) -> list[EpisodeTask]:
+    """Every episode of a suite selection, ordered by town, task and index.
+
+    Args:
+        towns / tasks: subsets of the suite's (None: all of them).
+        episodes: the first N episodes per (town, task), or explicit indices (None: all).
+        fidelity: None resolves to ``default_fidelity()``; an unknown one raises ValueError.
+    """
+    spec = get_suite(suite)
+    towns = list(dict.fromkeys(check_town(t) for t in (towns or spec.towns)))
+    tasks = list(dict.fromkeys(check_task(t) for t in (tasks or spec.tasks)))
+    if episodes is None:
+        indices = list(range(spec.episodes_per_task))
+    elif isinstance(episodes, int):
+        if episodes <= 0:
+            raise ValueError(f"episodes must be > 0, got {episodes}")
+        indices = list(range(min(episodes, spec.episodes_per_task)))
+    else:
+        indices = sorted(set(int(i) for i in episodes))
+        bad = [i for i in indices if not 0 <= i < spec.episodes_per_task]
+        if bad or not indices:
+            raise ValueError(f"episode indices must be in [0, {spec.episodes_per_task}), got {bad or 'none'}")
+    fidelity = fidelity or default_fidelity()
+    from hbmp_bench.envs.world import WorldConfig
+
+    WorldConfig(fidelity=fidelity)  # a bad fidelity fails here, naming the valid ones, not in every episode
+    order = {t: k for k, t in enumerate(TASKS)}
+    tasks = sorted(tasks, key=lambda t: order[t])
+    return [EpisodeTask(spec.name, town, task, i, agent, fidelity) for town in towns for task in tasks for i in indices]
+
+
+def adopt_environment(environ: dict[str, str] | None) -> None:
+    """Make ``os.environ`` of a child process equal to its caller's (passed at start)."""
+    if environ is not None:
+        os.environ.clear()
+        os.environ.update(environ)
+
+
+def watch_lifeline(lifeline) -> None:
+    """End this (child) process as soon as ``lifeline`` reaches EOF: the pool holds the only write
+    end, so a killed or crashed pool takes its children with it, even an agent hung in ``act``."""
+    import threading
+
+    def wait_for_eof() -> None:
+        try:
+            lifeline.recv()
+        except (EOFError, OSError):
+            pass
+        os._exit(70)
+
+    threading.Thread(target=wait_for_eof, name="hbmp-lifeline", daemon=True).start()

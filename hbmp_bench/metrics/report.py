@@ -1,0 +1,320 @@
+"""Evaluation reports as pandas DataFrames, for notebooks and for ``hbmp-bench report``.
+
+Input is one or more *result sets*: JSON-lines records files (or folders of them). Each set is
+labelled by its agent (plus the fidelity when sets differ in it, plus the folder when two sets
+would share a label). Per episode key the last record wins. Episodes recorded as ``sim_error``
+(not the agent's fault) or ``decision_cap`` (smoke runs) are left out of every view and counted
+in ``coverage``.
+
+Views (``build_report``):
+    success        success % in the paper's layout: task rows × town columns; with several sets
+                   the columns are (town, set).
+    failures       per (set, town) the number of *episodes* with each outcome: success, wrong lane
+                   (opposite lane or off-road: the paper's "out of lanes"), collision, red light,
+                   timeout, and agent errors. An episode with a collision and a red light counts
+                   in both; under CoRL2017 rules a successful episode can also have infractions.
+    driving        CARLA Leaderboard driving score and route completion (means over episodes, %),
+                   per (set, town) and over all towns.
+    km_between     km driven per infraction event, per set and kind (inf: no such event).
+    coverage       per set: episodes in the views, sim errors left out, agent errors.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+from hbmp_bench.metrics.records import AGENT_ERROR, DECISION_CAP, SIM_ERROR, EpisodeRecord, latest_per_key, read_records
+from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS
+
+OUTCOMES = ("success", "wrong_lane", "collision", "red_light", "timeout", "agent_error")
+"""Columns of the failure-count view, in the paper's figure order (agent errors appended)."""
+
+INFRACTIONS = ("collision", "collision_vehicle", "collision_pedestrian", "wrong_lane", "off_road", "red_light")
+"""Event kinds of the km-between-infractions view (``collision`` = all collisions)."""
+
+EXCLUDED = (SIM_ERROR, DECISION_CAP)
+
+
+def records_files(paths: Iterable[str | os.PathLike]) -> list[Path]:
+    """The ``.jsonl`` files named by ``paths`` (files, or folders searched non-recursively)."""
+    files: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(p.glob("*.jsonl"))
+            if not found:
+                raise FileNotFoundError(f"no .jsonl records in {p}")
+            files.extend(found)
+        elif p.is_file():
+            files.append(p)
+        else:
+            raise FileNotFoundError(f"no records file or folder {p}")
+    return files
+
+
+def load_results(paths: Iterable[str | os.PathLike]) -> pd.DataFrame:
+    """One row per episode of every result set, with a ``result_set`` label column.
+
+    A file holding several agents or fidelities gives one set for each.
+    """
+    frames = []
+    for path in records_files(paths):
+        records = latest_per_key(read_records(path))
+        if not records:
+            continue
+        df = pd.DataFrame([r.to_dict() for r in records])
+        df["source"] = str(path.parent if path.parent.name else path)
+        frames.append(df)
+    if not frames:
+        raise ValueError("the records files hold no records")
+    return label_result_sets(pd.concat(frames, ignore_index=True))
+
+
+def label_result_sets(df: pd.DataFrame) -> pd.DataFrame:
+    """Add ``result_set``: the agent, `` [fidelity]`` when fidelities differ, `` (folder)`` when
+    the same label comes from several folders."""
+    df = df.copy()
+    label = df["agent"].astype(str)
+    if df["fidelity"].nunique() > 1:
+        label = label + " [" + df["fidelity"].astype(str) + "]"
+    sources_per_label = df.assign(label=label).groupby("label")["source"].nunique()
+    clash = label.map(sources_per_label) > 1
+    label = label.where(~clash, label + " (" + df["source"].map(lambda s: Path(s).name) + ")")
+    df["result_set"] = label
+    return df
+
+
+def records_frame(records: Iterable[EpisodeRecord], label: str | None = None) -> pd.DataFrame:
+    """A report frame from records in memory (``result_set`` = ``label`` or the agent)."""
+    df = pd.DataFrame([r.to_dict() for r in latest_per_key(records)])
+    if df.empty:
+        raise ValueError("no records")
+    df["source"] = ""
+    if label is not None:
+        df["result_set"] = label
+        return df
+    return label_result_sets(df)
+
+
+def scored(df: pd.DataFrame) -> pd.DataFrame:
+    """The episodes the views count: without ``sim_error`` and ``decision_cap`` records."""
+    return df[~df["end_reason"].isin(EXCLUDED)]
+
+
+def _sets(df: pd.DataFrame) -> list[str]:
+    return list(dict.fromkeys(df["result_set"]))
+
+
+def _towns(df: pd.DataFrame) -> list[str]:
+    return sorted(df["town"].unique())
+
+
+def success_table(df: pd.DataFrame) -> pd.DataFrame:
+    """Success % (0–100, one decimal): task rows (paper labels) × town columns, or (town, set)
+    columns when ``df`` holds several result sets."""
+    df = scored(df)
+    if df.empty:
+        return pd.DataFrame()
+    sets = _sets(df)
+    columns = ["town"] if len(sets) == 1 else ["town", "result_set"]
+    table = df.pivot_table(index="task", columns=columns, values="success", aggfunc="mean") * 100.0
+    table = table.loc[[t for t in TASKS if t in table.index]].round(1)
+    if len(sets) > 1:
+        order = [(town, s) for town in _towns(df) for s in sets if (town, s) in table.columns]
+        table = table[order]
+        table.columns.names = ["town", "agent"]
+    else:
+        table.columns.name = "town"
+    table.index = pd.Index([TASK_LABELS[t] for t in table.index], name="task")
+    return table
+
+
+def failure_counts(df: pd.DataFrame) -> pd.DataFrame:
+    """Episodes per outcome (``OUTCOMES`` columns plus ``episodes``), index (result_set, town)."""
+    df = scored(df)
+    outcome = pd.DataFrame({
+        "result_set": df["result_set"],
+        "town": df["town"],
+        "episodes": 1,
+        "success": df["success"].astype(bool),
+        "wrong_lane": (df["wrong_lane"] + df["off_road"]) > 0,
+        "collision": (df["collision_vehicle"] + df["collision_pedestrian"] + df["collision_other"]) > 0,
+        "red_light": df["red_light"] > 0,
+        "timeout": df["timeout"].astype(bool),
+        "agent_error": df["end_reason"] == AGENT_ERROR,
+    })
+    counts = outcome.groupby(["result_set", "town"], sort=False).sum().astype(int)
+    order = [(s, t) for s in _sets(df) for t in _towns(df) if (s, t) in counts.index]
+    return counts.loc[order, ["episodes", *OUTCOMES]]
+
+
+def driving_table(df: pd.DataFrame) -> pd.DataFrame:
+    """Per (result_set, town) and (result_set, ``all``): episodes, success %, mean driving score
+    (CARLA Leaderboard, 0–100) and mean route completion %."""
+    df = scored(df)
+    rows = []
+    for result_set in _sets(df):
+        part = df[df["result_set"] == result_set]
+        for town, group in [*part.groupby("town"), ("all", part)]:
+            rows.append({
+                "result_set": result_set, "town": town, "episodes": len(group),
+                "success_pct": round(100.0 * group["success"].mean(), 1),
+                "driving_score": round(float(group["driving_score"].mean()), 2),
+                "route_completion_pct": round(100.0 * float(group["route_completion"].mean()), 1),
+            })
+    return pd.DataFrame(rows).set_index(["result_set", "town"])
+
+
+def km_between_infractions(df: pd.DataFrame) -> pd.DataFrame:
+    """Per result set: km driven and km per event of each kind in ``INFRACTIONS`` plus ``any``
+    (CoRL2017's "average distance between infractions"); inf where no such event happened."""
+    df = scored(df)
+    rows = []
+    for result_set in _sets(df):
+        part = df[df["result_set"] == result_set]
+        km = float(part["distance_m"].sum()) / 1000.0
+        counts = {
+            "collision": int((part["collision_vehicle"] + part["collision_pedestrian"] + part["collision_other"]).sum()),
+            **{k: int(part[k].sum()) for k in INFRACTIONS if k != "collision"},
+        }
+        counts["any"] = counts["collision"] + counts["wrong_lane"] + counts["off_road"] + counts["red_light"]
+        row = {"result_set": result_set, "km_driven": round(km, 3)}
+        row.update({kind: (round(km / n, 3) if n else math.inf) for kind, n in counts.items()})
+        rows.append(row)
+    return pd.DataFrame(rows).set_index("result_set")
+
+
+def coverage(df: pd.DataFrame) -> pd.DataFrame:
+    """Per result set: episodes counted, sim errors and decision-capped episodes left out, agent errors."""
+    rows = []
+    for result_set in _sets(df):
+        part = df[df["result_set"] == result_set]
+        rows.append({
+            "result_set": result_set,
+            "episodes": int((~part["end_reason"].isin(EXCLUDED)).sum()),
+            "sim_errors_left_out": int((part["end_reason"] == SIM_ERROR).sum()),
+            "capped_left_out": int((part["end_reason"] == DECISION_CAP).sum()),
+            "agent_errors": int((part["end_reason"] == AGENT_ERROR).sum()),
+            "fidelity": ",".join(sorted(part["fidelity"].astype(str).unique())),
+            "suite": ",".join(sorted(part["suite"].astype(str).unique())),
+        })
+    return pd.DataFrame(rows).set_index("result_set")
+
+
+@dataclass(frozen=True)
+class Report:
+    """Every view of a set of results (see the module docstring); ``views`` maps name → DataFrame."""
+
+    views: dict[str, pd.DataFrame]
+
+    def __getitem__(self, name: str) -> pd.DataFrame:
+        return self.views[name]
+
+
+def build_report(source: pd.DataFrame | Sequence[str | os.PathLike]) -> Report:
+    """All views of ``source``: a frame from ``load_results``/``records_frame`` or records paths."""
+    df = source if isinstance(source, pd.DataFrame) else load_results(source)
+    return Report({
+        "success": success_table(df),
+        "failures": failure_counts(df),
+        "driving": driving_table(df),
+        "km_between": km_between_infractions(df),
+        "coverage": coverage(df),
+    })
+
+
+def flat_frame(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` with its index as columns and (town, agent) column pairs joined as ``town / agent``."""
+    flat = df.copy()
+    if isinstance(flat.columns, pd.MultiIndex):
+        flat.columns = [" / ".join(map(str, c)) for c in flat.columns]
+    return flat.reset_index()
+
+
+def view_rows(df: pd.DataFrame) -> list[dict]:
+    """JSON-ready rows of a view (``flat_frame``); inf and NaN become None."""
+    rows = flat_frame(df).to_dict(orient="records")
+    return [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()} for row in rows]
+
+
+def to_markdown(df: pd.DataFrame) -> str:
+    """A GitHub markdown table of ``df`` (index included; floats in their shortest form)."""
+    flat = flat_frame(df)
+    header = [str(c) for c in flat.columns]
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    for row in flat.itertuples(index=False):
+        lines.append("| " + " | ".join(_cell(v) for v in row) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _cell(value) -> str:
+    if isinstance(value, float):
+        if math.isinf(value):
+            return "inf"
+        if math.isnan(value):
+            return ""
+        return f"{value:g}"
+    return str(value).replace("|", "\\|")
+
+
+def plot_failures(counts: pd.DataFrame, path: str | os.PathLike) -> Path:
+    """Grouped bar chart of ``failure_counts``: per town one bar per outcome (one panel per
+    result set), like the paper's tests-in-5-towns figure. Writes a PNG; returns its path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    from matplotlib.ticker import MaxNLocator
+
+    sets = list(dict.fromkeys(counts.index.get_level_values("result_set")))
+    fig, axes = plt.subplots(len(sets), 1, figsize=(9, 3.4 * len(sets)), squeeze=False)
+    width = 0.8 / len(OUTCOMES)
+    for ax, result_set in zip(axes[:, 0], sets):
+        part = counts.xs(result_set, level="result_set")
+        x = np.arange(len(part))
+        for k, outcome in enumerate(OUTCOMES):
+            ax.bar(x + (k - (len(OUTCOMES) - 1) / 2) * width, part[outcome], width, label=outcome.replace("_", " "))
+        ax.set_xticks(x, list(part.index))
+        ax.set_ylabel("episodes")
+        ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_title(f"{result_set}: outcomes per town ({int(part['episodes'].sum())} episodes)")
+        ax.legend(ncol=len(OUTCOMES), fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.12))
+    fig.tight_layout()
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp.png")
+    fig.savefig(tmp, dpi=120)
+    plt.close(fig)
+    os.replace(tmp, path)
+    return path
+
+
+def write_report(report: Report, out_dir: str | os.PathLike) -> list[Path]:
+    """Write every view as ``<name>.csv`` and ``<name>.md``, ``failures.png``, and ``report.md``
+    with all tables; each file written to a temporary name and renamed. Returns the paths."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    written = []
+    sections = ["# Evaluation report\n"]
+    for name, view in report.views.items():
+        written.append(_write_text(out / f"{name}.csv", view.to_csv()))
+        markdown = to_markdown(view) if not view.empty else "(no episodes)\n"
+        written.append(_write_text(out / f"{name}.md", markdown))
+        sections.append(f"## {name}\n\n{markdown}")
+    if not report["failures"].empty:
+        written.append(plot_failures(report["failures"], out / "failures.png"))
+        sections.append("![failures per town](failures.png)\n")
+    written.append(_write_text(out / "report.md", "\n".join(sections)))
+    return written
+
+
+def _write_text(path: Path, text: str) -> Path:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+    return path

@@ -1,0 +1,108 @@
+"""Leaderboard submissions: results files with provenance, the ranked README, refusal of stale files.
+
+Full submissions run on ``tiny-test`` (two Town01 Straight episodes, registered by ``tiny_suite``);
+a corl2017 subset checks that partial runs are kept apart and never ranked.
+"""
+
+import json
+import shutil
+
+import pytest
+
+import tiny_suite
+from hbmp_bench.cli import main
+from hbmp_bench.evaluation import RunnerLimits
+from hbmp_bench.evaluation.leaderboard import (
+    StaleResultsError,
+    add_results,
+    entry_path,
+    load_entries,
+    render_readme,
+    runs_dir,
+    submit,
+)
+from hbmp_bench.scenarios import get_suite
+
+pytestmark = pytest.mark.slow
+
+TINY = RunnerLimits(env_factory="tiny_suite:make_env")  # children import the module that registers the suite
+
+
+@pytest.fixture(scope="module")
+def board(tmp_path_factory):
+    """A board with two complete tiny-test entries (expert, keep)."""
+    root = tmp_path_factory.mktemp("leaderboards")
+    for agent in ("keep", "expert"):
+        submit(tiny_suite.NAME, agent, board_dir=root, fidelity="event", workers=1, limits=TINY, progress=False)
+    return root
+
+
+def test_complete_entries_carry_provenance_and_are_ranked(board):
+    doc = json.loads(entry_path(board, tiny_suite.NAME, "expert", subset=False).read_text())
+    spec = get_suite(tiny_suite.NAME)
+    assert doc["complete"] and not doc["subset"] and doc["expected_episodes"] == 2
+    assert doc["suite_hash"] == spec.definition_hash() == doc["provenance"]["suite_definition_hash"]
+    prov = doc["provenance"]
+    for key in ("package_version", "git_commit", "date_utc", "machine", "libraries", "fidelity", "seeds", "wall_time_s"):
+        assert key in prov
+    assert prov["fidelity"] == doc["fidelity"] == "event"
+    assert prov["seeds"]["suite_seed"] == spec.seed
+    assert prov["machine"]["cpu_count"] >= 1 and prov["wall_time_s"] > 0
+    assert [e["episode"] for e in doc["episodes"]] == [0, 1] and all(e["seed"] >= 0 for e in doc["episodes"])
+    assert doc["summary"]["success_pct"] == 100.0 and doc["summary"]["episodes"] == 2
+    assert doc["aggregates"]["success_pct_by_task"] == {"Straight": 100.0}
+    keep = json.loads(entry_path(board, tiny_suite.NAME, "keep", subset=False).read_text())
+    assert keep["summary"]["success_pct"] == 0.0
+
+    readme = (board / tiny_suite.NAME / "README.md").read_text()
+    assert spec.definition_hash() in readme and "## Fidelity: event" in readme
+    rows = [line for line in readme.splitlines() if line.startswith("| 1 ") or line.startswith("| 2 ")]
+    assert rows[0].startswith("| 1 | `expert` | 100.0") and rows[1].startswith("| 2 | `keep` | 0.0")
+    assert "Partial runs" not in readme
+    assert len(list(runs_dir(board, tiny_suite.NAME).glob("*.jsonl"))) == 2  # raw records kept for resuming
+
+
+def test_a_resubmission_resumes_from_its_records(board):
+    path, doc = submit(tiny_suite.NAME, "expert", board_dir=board, fidelity="event", workers=1, limits=TINY,
+                       progress=False)
+    assert doc["complete"] and doc["summary"]["episodes"] == 2
+    assert doc["provenance"]["wall_time_s"] is None  # nothing ran: no wall time to report
+
+
+def test_a_stale_results_file_is_refused_with_a_clear_message(board, tmp_path):
+    copy = tmp_path / "board"
+    shutil.copytree(board, copy)
+    path = entry_path(copy, tiny_suite.NAME, "keep", subset=False)
+    doc = json.loads(path.read_text())
+    doc["suite_hash"] = "0123456789abcdef"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(StaleResultsError, match="definition hash '0123456789abcdef'.*Rerun the submission"):
+        render_readme(copy, tiny_suite.NAME)
+    with pytest.raises(StaleResultsError):
+        add_results(path, tmp_path / "other")
+    with pytest.raises(StaleResultsError):  # refused before any episode runs
+        submit(tiny_suite.NAME, "random", board_dir=copy, limits=TINY, progress=False)
+    assert main(["leaderboard", "render", "--suite", tiny_suite.NAME, "--board-dir", str(copy)]) == 2
+
+
+def test_add_installs_a_checked_results_file(board, tmp_path):
+    target = add_results(entry_path(board, tiny_suite.NAME, "expert", subset=False), tmp_path)
+    assert target == entry_path(tmp_path, tiny_suite.NAME, "expert", subset=False)
+    assert [e["agent"] for e in load_entries(tmp_path, tiny_suite.NAME)] == ["expert"]
+    assert "`expert`" in (tmp_path / tiny_suite.NAME / "README.md").read_text()
+
+
+def test_a_corl2017_subset_is_written_apart_and_not_ranked(tmp_path, capsys):
+    assert main(["leaderboard", "submit", "--suite", "corl2017", "--agent", "expert", "--towns", "Town01",
+                 "--tasks", "Straight", "--episodes", "1", "--fidelity", "event", "--workers", "1",
+                 "--board-dir", str(tmp_path), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["subset"] and not out["complete"] and out["episodes"] == 1
+    path = entry_path(tmp_path, "corl2017", "expert", subset=True)
+    assert out["results"] == str(path) and path.name == "expert.subset.json"
+    assert not entry_path(tmp_path, "corl2017", "expert", subset=False).exists()
+    doc = json.loads(path.read_text())
+    assert doc["selection"] == {"towns": ["Town01"], "tasks": ["Straight"], "episodes": [0]}
+    readme = (tmp_path / "corl2017" / "README.md").read_text()
+    assert "No complete entries yet." in readme
+    assert "## Partial runs (not ranked)" in readme and "| – | `expert` | 100.0" in readme

@@ -1,0 +1,125 @@
+"""pandas report views computed from records with known outcomes."""
+
+import dataclasses
+import json
+import math
+
+import pandas as pd
+import pytest
+
+from hbmp_bench.metrics.records import EpisodeRecord, append_record, latest_per_key, read_records, repair_records
+from hbmp_bench.metrics.report import (
+    build_report,
+    driving_table,
+    failure_counts,
+    km_between_infractions,
+    load_results,
+    records_frame,
+    success_table,
+    to_markdown,
+    write_report,
+)
+
+BASE = EpisodeRecord(
+    suite="corl2017", town="Town01", task="Straight", episode=0, seed=1, agent="a", package_version="0",
+    fidelity="event", success=True, route_completion=1.0, collision_vehicle=0, collision_pedestrian=0,
+    collision_other=0, wrong_lane=0, off_road=0, red_light=0, timeout=False, duration_s=30.0, distance_m=500.0,
+    route_length_m=500.0, decisions=300, driving_score=100.0, end_reason="goal",
+)
+
+
+def rec(**changes) -> EpisodeRecord:
+    return dataclasses.replace(BASE, **changes)
+
+
+def failed(**changes) -> EpisodeRecord:
+    return rec(**{"success": False, "route_completion": 0.5, "driving_score": 50.0, "end_reason": "timeout",
+                  "timeout": True, **changes})
+
+
+@pytest.fixture
+def two_sets():
+    a = [
+        rec(episode=0),
+        failed(episode=1, collision_vehicle=1, red_light=2, distance_m=250.0, driving_score=21.0),
+        rec(task="OneTurn", episode=0, wrong_lane=1, off_road=1, driving_score=80.0),
+        rec(town="Town02", episode=0),
+        rec(town="Town02", episode=1, success=False, end_reason="agent_error", error="boom", route_completion=0.1,
+            driving_score=10.0, distance_m=50.0),
+        rec(town="Town02", episode=2, success=False, end_reason="sim_error", error="SUMO died", distance_m=9999.0),
+    ]
+    b = [rec(agent="b", episode=0), failed(agent="b", episode=1), rec(agent="b", town="Town02", episode=0)]
+    return records_frame(a + b)
+
+
+def test_success_table_paper_layout_with_a_column_per_agent(two_sets):
+    table = success_table(two_sets)
+    assert list(table.index) == ["Straight", "One turn"]
+    assert list(table.columns) == [("Town01", "a"), ("Town01", "b"), ("Town02", "a"), ("Town02", "b")]
+    assert table.loc["Straight", ("Town01", "a")] == 50.0
+    assert table.loc["One turn", ("Town01", "a")] == 100.0
+    assert table.loc["Straight", ("Town02", "a")] == 50.0  # the sim_error episode is left out
+    assert table.loc["Straight", ("Town02", "b")] == 100.0
+    single = success_table(two_sets[two_sets["result_set"] == "a"])
+    assert list(single.columns) == ["Town01", "Town02"]
+
+
+def test_failure_counts_count_episodes_per_outcome(two_sets):
+    counts = failure_counts(two_sets)
+    a1 = counts.loc[("a", "Town01")]
+    assert a1.to_dict() == {"episodes": 3, "success": 2, "wrong_lane": 1, "collision": 1, "red_light": 1,
+                            "timeout": 1, "agent_error": 0}
+    assert counts.loc[("a", "Town02"), "agent_error"] == 1 and counts.loc[("a", "Town02"), "episodes"] == 2
+    assert list(counts.index) == [("a", "Town01"), ("a", "Town02"), ("b", "Town01"), ("b", "Town02")]
+
+
+def test_driving_score_route_completion_and_km_between_infractions(two_sets):
+    driving = driving_table(two_sets)
+    assert driving.loc[("a", "Town01"), "driving_score"] == pytest.approx((100 + 21 + 80) / 3, abs=0.01)
+    assert driving.loc[("a", "Town01"), "route_completion_pct"] == pytest.approx(100 * (1 + 0.5 + 1) / 3, abs=0.1)
+    assert driving.loc[("a", "all"), "episodes"] == 5
+    km = km_between_infractions(two_sets)
+    driven = (500 + 250 + 500 + 500 + 50) / 1000.0  # sim_error episode not counted
+    assert km.loc["a", "km_driven"] == pytest.approx(driven)
+    assert km.loc["a", "collision"] == pytest.approx(driven / 1)
+    assert km.loc["a", "red_light"] == pytest.approx(driven / 2)
+    assert km.loc["a", "any"] == pytest.approx(driven / 5)  # 1 collision + 2 red + 1 wrong lane + 1 off-road
+    assert math.isinf(km.loc["b", "red_light"])
+
+
+def test_report_files_and_markdown(two_sets, tmp_path):
+    report = build_report(two_sets)
+    assert report["coverage"].loc["a"].to_dict()["sim_errors_left_out"] == 1
+    written = write_report(report, tmp_path / "report")
+    names = {p.name for p in written}
+    assert {"success.csv", "success.md", "failures.png", "report.md", "km_between.md"} <= names
+    assert not list((tmp_path / "report").glob("*.tmp*"))
+    md = to_markdown(report["success"])
+    assert md.splitlines()[0] == "| task | Town01 / a | Town01 / b | Town02 / a | Town02 / b |"
+    assert "| Straight | 50 | 50 | 50 | 100 |" in md
+    assert pd.read_csv(tmp_path / "report" / "failures.csv").shape[0] == 4
+
+
+def test_load_results_labels_sets_dedupes_keys_and_tolerates_a_torn_line(tmp_path):
+    for folder, agent in (("run1", "expert"), ("run2", "expert")):
+        (tmp_path / folder).mkdir()
+        path = tmp_path / folder / "corl2017__expert.jsonl"
+        append_record(path, failed(agent=agent, end_reason="sim_error", timeout=False))
+        append_record(path, rec(agent=agent))  # a rerun of the same key: the latest wins
+    with open(tmp_path / "run2" / "corl2017__expert.jsonl", "a") as fh:
+        fh.write('{"suite": "corl20')
+    df = load_results([tmp_path / "run1", tmp_path / "run2"])
+    assert sorted(df["result_set"].unique()) == ["expert (run1)", "expert (run2)"]
+    assert len(df) == 2 and df["success"].all()
+    assert repair_records(tmp_path / "run2" / "corl2017__expert.jsonl") == len('{"suite": "corl20')
+    assert [json.loads(l)["end_reason"] for l in (tmp_path / "run2" / "corl2017__expert.jsonl").open()] == ["sim_error", "goal"]
+
+
+def test_records_keep_reading_old_lines_without_the_error_field(tmp_path):
+    path = tmp_path / "old.jsonl"
+    row = BASE.to_dict()
+    del row["error"]
+    path.write_text(json.dumps(row) + "\n")
+    (record,) = read_records(path)
+    assert record.error == "" and record.key == ("corl2017", "Town01", "Straight", 0, "a", "event")
+    assert latest_per_key([record, dataclasses.replace(record, success=False)])[0].success is False
