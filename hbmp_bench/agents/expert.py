@@ -102,8 +102,12 @@ class ExpertAgent:
         stop_at = gap
         if must_stop:
             stop_at = min(stop_at, d_stop + self.stop_margin_m - 1.0)
-        if not scene["in_junction"] and road[3] < 0.5 and d_stop < 30.0:
-            room_to_change = 12.0 if period > 0.2 else 0.0
+        offset = scene["route_lane_offset"]
+        change = CHANGE_LEFT if offset > 0 else CHANGE_RIGHT
+        if not scene["in_junction"] and road[3] < 0.5 and d_stop < 30.0 and (offset == 0 or mask[change]):
+            # wait for a gap to the route's lane, early enough to change lanes from there; once
+            # lane changes are closed (last metres of the lane) drive on: the route is re-planned
+            room_to_change = 16.0 if period > 0.2 else 0.0
             stop_at = min(stop_at, d_stop + self.stop_margin_m - 1.0 - room_to_change)
         target = min(target, self._stop_speed(stop_at - travel))
         if scene.get("turn_ahead", "") in ("l", "L", "r", "R"):
@@ -113,7 +117,6 @@ class ExpertAgent:
 
         self._stuck_s = self._stuck_s + period if (v < 0.5 and gap < 15.0 and not must_stop) else 0.0
         if not scene["in_junction"]:
-            offset = scene["route_lane_offset"]
             if offset != 0:
                 side = 1 if offset > 0 else -1
                 action = CHANGE_LEFT if side > 0 else CHANGE_RIGHT

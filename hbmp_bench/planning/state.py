@@ -79,10 +79,12 @@ class Obstacles:
         for n, a in arrs.items():
             if a.shape != (k,):
                 raise ValueError(f"Obstacles.{n} has shape {a.shape}, expected ({k},)")
-            if not np.all(np.isfinite(a)):
-                raise ValueError(f"Obstacles.{n} must be finite")
             object.__setattr__(self, n, a)
-        if np.any(arrs["length"] <= 0) or np.any(arrs["width"] <= 0):
+        table = np.stack(list(arrs.values()))  # one finiteness check for all six (hot path)
+        if not np.isfinite(table).all():
+            bad = next(n for n, a in arrs.items() if not np.isfinite(a).all())
+            raise ValueError(f"Obstacles.{bad} must be finite")
+        if not (table[4:] > 0).all():
             raise ValueError("Obstacles.length and width must be > 0 [m]")
         object.__setattr__(self, "_k", k)
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -144,6 +145,7 @@ class SumoSim:
         self._dims: dict[str, tuple[float, float, bool]] = {}
         self._routes = 0
         self._controlled: dict[str, list[str]] | None = None
+        self._snapshot_dims: tuple | None = None
 
     # --------------------------------------------------------------- lifecycle
     @property
@@ -176,6 +178,7 @@ class SumoSim:
         SumoSim._active = self
         self._controlled = None
         self._dims = {}
+        self._snapshot_dims = None
         self._routes = 0
         for vtype in (EGO_TYPE, BACKGROUND_TYPE):
             libsumo.vehicletype.copy("DEFAULT_VEHTYPE", vtype.id)
@@ -203,6 +206,23 @@ class SumoSim:
     def step(self) -> None:
         """Advance one step of ``step_length``."""
         libsumo.simulationStep()
+
+    def time_raw_steps(self, steps: int) -> float:
+        """Wall time [s] of ``steps`` bare ``libsumo.simulationStep()`` calls, after dropping every
+        subscription and giving all handed-over vehicles back to SUMO's own driver (throughput
+        reference: SUMO alone, no package code per step). The scene is unusable for an episode after."""
+        for vehicle_id in libsumo.vehicle.getIDList():
+            libsumo.vehicle.unsubscribe(vehicle_id)
+            libsumo.vehicle.setSpeed(vehicle_id, -1.0)
+            libsumo.vehicle.setSpeedMode(vehicle_id, 31)
+            libsumo.vehicle.setLaneChangeMode(vehicle_id, 1621)
+        for person_id in libsumo.person.getIDList():
+            libsumo.person.unsubscribe(person_id)
+        simulation_step = libsumo.simulationStep
+        start = time.perf_counter()
+        for _ in range(int(steps)):
+            simulation_step()
+        return time.perf_counter() - start
 
     # ------------------------------------------------------------------ actors
     def add_vehicle(
@@ -262,8 +282,13 @@ class SumoSim:
         pos = np.array([r[1][tc.VAR_POSITION] for r in results], dtype=float).reshape(k, 2)
         yaw = sumo_angle_to_yaw(np.array([r[1][tc.VAR_ANGLE] for r in results], dtype=float))
         speed = np.array([r[1][tc.VAR_SPEED] for r in results], dtype=float)
-        dims = np.array([self._dims.get(i, (4.5, 1.8, False)) for i in ids], dtype=float).reshape(k, 3)
-        length, width, is_ped = dims[:, 0], dims[:, 1], dims[:, 2].astype(bool)
+        if self._snapshot_dims is None or self._snapshot_dims[0] != ids:  # actors rarely change: cache
+            dims = np.array([self._dims.get(i, (4.5, 1.8, False)) for i in ids], dtype=float).reshape(k, 3)
+            cached = (dims[:, 0].copy(), dims[:, 1].copy(), dims[:, 2].astype(bool))
+            for a in cached:
+                a.setflags(write=False)  # shared by the snapshots that follow
+            self._snapshot_dims = (ids, *cached)
+        _, length, width, is_ped = self._snapshot_dims
         heading = np.stack([np.cos(yaw), np.sin(yaw)], axis=1)
         centre = pos - np.where(is_ped, 0.0, length / 2)[:, None] * heading
         return Actors(ids, centre, yaw, speed, length, width, is_ped)
@@ -298,6 +323,19 @@ class SumoSim:
         return libsumo.trafficlight.getRedYellowGreenState(tls)[link_index]
 
     # ---------------------------------------------------------------- commands
+    def track_lane(self, vehicle_id: str) -> None:
+        """Subscribe a vehicle to its lane variables too, so :meth:`vehicle_state` works for it
+        (done for the ego on insertion; a background vehicle driven by an agent needs it)."""
+        libsumo.vehicle.subscribe(vehicle_id, _EGO_SUBSCRIBED)
+
+    def remove_vehicle(self, vehicle_id: str) -> None:
+        """Take a vehicle out of the simulation (no-op if it is already gone)."""
+        try:
+            libsumo.vehicle.unsubscribe(vehicle_id)  # a subscription of a removed vehicle breaks the next step
+            libsumo.vehicle.remove(vehicle_id)
+        except libsumo.TraCIException:
+            pass
+
     def hand_over(self, vehicle_id: str) -> None:
         """Give a vehicle's driving to the caller: no SUMO lane changes, no safe-speed or red-light
         braking (only its acceleration limits), so the agent can and must avoid infractions."""

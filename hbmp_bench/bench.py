@@ -1,0 +1,463 @@
+"""Throughput of the package against raw SUMO and highway-env, measured in one run.
+
+``hbmp-bench bench [--json] [--quick] [--out FILE] [--profile N]`` (also ``benchmarks/throughput.py``).
+
+What is measured, on the same scenario and traffic (``corl2017`` NavigationDynamic episode 0 of
+each town, env reset seed 0):
+
+- **raw SUMO**: the env builds the scene (same vehicles, pedestrians, routes and SUMO seed), then
+  every subscription is dropped, the ego is given back to SUMO's driver and only
+  ``libsumo.simulationStep()`` runs for ``raw_steps`` steps (:meth:`SumoSim.time_raw_steps`).
+- **env**: :class:`BehaviorEnv` with the expert agent in ``event`` and ``continuous`` fidelity for a
+  fixed wall time (agent time included, reset time excluded; the episode restarts when it ends).
+  Sim steps = Σ ``info["duration_s"]`` / step length. Ratio = env sim steps/s ÷ raw steps/s.
+  While it runs, the SUMO step, the driver's control period, the planner call, M_t and R_t are
+  timed in place (a ``perf_counter`` pair each, ~1 µs).
+- **highway-env** ``highway-fast-v0`` and ``intersection-v0``: random actions, decisions/s.
+- **scaling**: 1 and 2 worker processes (spawned, one env each, random actions, started together
+  behind a barrier), total decisions/s; the workers also report their peak memory (``ru_maxrss``).
+
+The targets are those of the throughput issue: continuous ≥ 0.4× raw, event ≥ 0.7× raw,
+decisions/s ≥ 10× (event) and ≥ 5× (continuous) highway-fast-v0, two workers ≥ 1.7× one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import cProfile
+import dataclasses
+import io
+import json
+import multiprocessing as mp
+import os
+import platform
+import pstats
+import resource
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hbmp_bench import __version__
+
+FIDELITIES = ("event", "continuous")
+HIGHWAY_ENVS = ("highway-fast-v0", "intersection-v0")
+
+
+@dataclass(frozen=True)
+class BenchConfig:
+    """What to measure and for how long.
+
+    Attributes:
+        towns: towns to measure (each: raw SUMO and the env in both fidelities).
+        task / suite / episode_index: the scenario (its traffic is the suite's).
+        raw_steps: bare SUMO steps timed per town.
+        env_seconds: wall time per (town, fidelity) env run [s].
+        highway_seconds: wall time per highway-env id [s] (0 skips highway-env).
+        scaling_workers: worker counts of the scaling measurement (empty skips it).
+        scaling_seconds: wall time of each scaling run [s].
+        scaling_town / scaling_fidelity: the env the workers run (random actions).
+    """
+
+    towns: tuple[str, ...] = ("Town01", "Town03")
+    task: str = "NavigationDynamic"
+    suite: str = "corl2017"
+    episode_index: int = 0
+    raw_steps: int = 3000
+    env_seconds: float = 20.0
+    highway_seconds: float = 8.0
+    scaling_workers: tuple[int, ...] = (1, 2)
+    scaling_seconds: float = 15.0
+    scaling_town: str = "Town01"
+    scaling_fidelity: str = "continuous"
+
+    def __post_init__(self):
+        if not self.towns:
+            raise ValueError("towns must not be empty")
+        if self.raw_steps <= 0 or self.env_seconds <= 0 or self.scaling_seconds <= 0:
+            raise ValueError("raw_steps, env_seconds and scaling_seconds must be > 0")
+        if self.highway_seconds < 0:
+            raise ValueError("highway_seconds must be >= 0")
+        if any(n <= 0 for n in self.scaling_workers):
+            raise ValueError(f"scaling_workers must be > 0, got {self.scaling_workers}")
+        if self.scaling_fidelity not in FIDELITIES:
+            raise ValueError(f"scaling_fidelity must be one of {FIDELITIES}, got {self.scaling_fidelity!r}")
+
+    @classmethod
+    def quick(cls) -> "BenchConfig":
+        """A smoke run of every part (seconds, not minutes; the numbers mean little)."""
+        return cls(towns=("Town01",), raw_steps=200, env_seconds=1.5, highway_seconds=0.5,
+                   scaling_workers=(1,), scaling_seconds=1.0)
+
+
+# ----------------------------------------------------------------- helpers
+def machine_info() -> dict:
+    """Platform, CPU model (from /proc/cpuinfo where present), CPU count, Python, SUMO and package versions."""
+    cpu = platform.processor() or platform.machine()
+    with contextlib.suppress(OSError):
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    return {
+        "platform": platform.platform(),
+        "cpu_model": cpu,
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "sumo": _dist_version("eclipse-sumo") or _dist_version("libsumo"),
+        "highway_env": _dist_version("highway-env"),
+        "package_version": __version__,
+    }
+
+
+def _dist_version(name: str) -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version(name)
+    except metadata.PackageNotFoundError:
+        return ""
+
+
+def _peak_rss_mb() -> float:
+    """Peak resident memory of this process [MB] (Linux reports KiB, macOS bytes)."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return round(peak / (2**20 if sys.platform == "darwin" else 2**10), 1)
+
+
+def latency_stats(seconds: list[float]) -> dict:
+    """Median, p95 and mean [ms] and the count of a list of durations [s]."""
+    if not seconds:
+        return {"n": 0, "median_ms": None, "p95_ms": None, "mean_ms": None}
+    a = np.asarray(seconds) * 1e3
+    return {"n": int(a.size), "median_ms": round(float(np.median(a)), 4),
+            "p95_ms": round(float(np.percentile(a, 95)), 4), "mean_ms": round(float(a.mean()), 4)}
+
+
+class _Timer:
+    """Wraps a callable and records the wall time of every call [s]."""
+
+    def __init__(self, fn):
+        self.fn, self.times = fn, []
+
+    def __call__(self, *args, **kwargs):
+        t0 = time.perf_counter()
+        try:
+            return self.fn(*args, **kwargs)
+        finally:
+            self.times.append(time.perf_counter() - t0)
+
+
+class _TimedObserver:
+    """Stands in for a world's :class:`ObservationBuilder`, timing ``occupancy`` (M_t)."""
+
+    def __init__(self, observer):
+        self._observer = observer
+        self.occupancy = _Timer(observer.occupancy)
+
+    def __getattr__(self, name):
+        return getattr(self._observer, name)
+
+
+@contextlib.contextmanager
+def _instrumented(env):
+    """Time the SUMO step, the driver's control period, the planner, M_t and R_t of ``env`` in place.
+
+    Yields a dict name -> :class:`_Timer`; everything is restored on exit."""
+    import hbmp_bench.envs.world as world_module
+    import hbmp_bench.planning.executor as executor_module
+
+    world = env.world
+    timers = {"sumo_step": _Timer(world.sim.step), "driver_before_step": _Timer(world.driver.before_step),
+              "planner": _Timer(executor_module.plan), "road_profile": _Timer(world_module.road_profile)}
+    observer = _TimedObserver(world.observer)
+    timers["occupancy"] = observer.occupancy
+    saved = world.observer, executor_module.plan, world_module.road_profile
+    world.sim.step, world.driver.before_step = timers["sumo_step"], timers["driver_before_step"]
+    world.observer, executor_module.plan, world_module.road_profile = observer, timers["planner"], timers["road_profile"]
+    try:
+        yield timers
+    finally:
+        del world.sim.step, world.driver.before_step
+        world.observer, executor_module.plan, world_module.road_profile = saved
+
+
+def _make_env(cfg: BenchConfig, town: str, fidelity: str):
+    from hbmp_bench.envs.behavior_env import BehaviorEnv
+
+    return BehaviorEnv(town=town, task=cfg.task, suite=cfg.suite, episode_index=cfg.episode_index, fidelity=fidelity)
+
+
+# ------------------------------------------------------------ measurements
+def measure_raw_sumo(cfg: BenchConfig, town: str) -> dict:
+    """Bare ``libsumo.simulationStep()`` rate on the env's own scene (see the module doc)."""
+    env = _make_env(cfg, town, "event")
+    try:
+        env.reset(seed=0)
+        actors = env.world.sim.snapshot()
+        seconds = env.world.sim.time_raw_steps(cfg.raw_steps)
+    finally:
+        env.close()
+    return {"town": town, "steps": cfg.raw_steps, "seconds": round(seconds, 4),
+            "steps_per_s": round(cfg.raw_steps / seconds, 1),
+            "vehicles": int((~actors.is_pedestrian).sum()) + 1, "pedestrians": int(actors.is_pedestrian.sum())}
+
+
+def measure_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float | None = None) -> dict:
+    """The env with the expert for ``seconds`` of stepping: sim steps/s, decisions/s, in-place latencies."""
+    from hbmp_bench.agents import load_agent
+
+    seconds = cfg.env_seconds if seconds is None else seconds
+    env = _make_env(cfg, town, fidelity)
+    agent = load_agent("expert")
+    step_length = env.config.step_length_s
+    decisions = sim_steps = episodes = 0
+    stepping = resetting = 0.0
+    try:
+        t0 = time.perf_counter()
+        obs, info = env.reset(seed=0)
+        resetting += time.perf_counter() - t0
+        agent.reset(info)
+        with _instrumented(env) as timers:
+            while stepping < seconds:
+                t0 = time.perf_counter()
+                obs, _, terminated, truncated, info = env.step(agent.act(obs, info))
+                stepping += time.perf_counter() - t0
+                decisions += 1
+                sim_steps += int(round(info["duration_s"] / step_length))
+                if terminated or truncated:
+                    episodes += 1
+                    t0 = time.perf_counter()
+                    obs, info = env.reset(seed=episodes)
+                    resetting += time.perf_counter() - t0
+                    agent.reset(info)
+            latency = {name: latency_stats(t.times) for name, t in timers.items()}
+            share = {name: round(sum(t.times) / stepping, 4) for name, t in timers.items()}
+    finally:
+        env.close()
+    return {"town": town, "fidelity": fidelity, "seconds": round(stepping, 3), "reset_seconds": round(resetting, 3),
+            "decisions": decisions, "sim_steps": sim_steps, "episodes_finished": episodes,
+            "decisions_per_s": round(decisions / stepping, 2), "sim_steps_per_s": round(sim_steps / stepping, 1),
+            "latency": latency, "time_share": share}
+
+
+def measure_highway(env_id: str, seconds: float, seed: int = 0) -> dict:
+    """highway-env ``env_id`` with random actions for ``seconds`` of stepping: decisions/s, sim steps/s."""
+    import gymnasium as gym
+    import highway_env  # noqa: F401  (registers the ids)
+
+    env = gym.make(env_id)
+    env.action_space.seed(seed)
+    per_decision = env.unwrapped.config["simulation_frequency"] // env.unwrapped.config["policy_frequency"]
+    decisions, stepping = 0, 0.0
+    try:
+        env.reset(seed=seed)
+        while stepping < seconds:
+            t0 = time.perf_counter()
+            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+            stepping += time.perf_counter() - t0
+            decisions += 1
+            if terminated or truncated:
+                env.reset()
+    finally:
+        env.close()
+    return {"env": env_id, "seconds": round(stepping, 3), "decisions": decisions,
+            "decisions_per_s": round(decisions / stepping, 2),
+            "sim_steps_per_s": round(decisions * per_decision / stepping, 1)}
+
+
+def _scaling_worker(cfg: BenchConfig, seed: int, barrier, queue) -> None:
+    """One training-style worker: its own env (own libsumo), random actions for ``scaling_seconds``."""
+    try:
+        env = _make_env(cfg, cfg.scaling_town, cfg.scaling_fidelity)
+        env.action_space.seed(seed)
+        env.reset(seed=seed)
+        barrier.wait()
+        decisions, sim_steps, start = 0, 0, time.perf_counter()
+        while time.perf_counter() - start < cfg.scaling_seconds:
+            _, _, terminated, truncated, info = env.step(int(env.action_space.sample()))
+            decisions += 1
+            sim_steps += int(round(info["duration_s"] / env.config.step_length_s))
+            if terminated or truncated:
+                env.reset(seed=seed + decisions)
+        wall = time.perf_counter() - start
+        env.close()
+        queue.put({"seed": seed, "decisions": decisions, "sim_steps": sim_steps, "seconds": round(wall, 3),
+                   "peak_rss_mb": _peak_rss_mb()})
+    except BaseException as exc:  # the parent must not wait forever
+        barrier.abort()
+        queue.put({"seed": seed, "error": repr(exc)})
+
+
+def measure_scaling(cfg: BenchConfig, workers: int) -> dict:
+    """Total decisions/s of ``workers`` spawned processes stepping at the same time."""
+    ctx = mp.get_context("spawn")
+    barrier, queue = ctx.Barrier(workers), ctx.Queue()
+    procs = [ctx.Process(target=_scaling_worker, args=(cfg, 1000 + k, barrier, queue)) for k in range(workers)]
+    for p in procs:
+        p.start()
+    rows = [queue.get(timeout=cfg.scaling_seconds + 300) for _ in procs]
+    for p in procs:
+        p.join()
+    errors = [r["error"] for r in rows if "error" in r]
+    if errors:
+        raise RuntimeError(f"scaling worker failed: {errors[0]}")
+    return {"workers": workers, "town": cfg.scaling_town, "fidelity": cfg.scaling_fidelity, "actions": "random",
+            "decisions_per_s": round(sum(r["decisions"] / r["seconds"] for r in rows), 2),
+            "sim_steps_per_s": round(sum(r["sim_steps"] / r["seconds"] for r in rows), 1),
+            "peak_rss_mb_per_process": max(r["peak_rss_mb"] for r in rows), "per_worker": rows}
+
+
+# ----------------------------------------------------------------- targets
+def target_checks(result: dict) -> list[dict]:
+    """The issue's target ratios from one run's result: name, value, target, passed."""
+    checks = []
+
+    def add(name, value, target):
+        if value is not None:
+            checks.append({"name": name, "value": round(value, 3), "target": target, "passed": bool(value >= target)})
+
+    for town, row in result["towns"].items():
+        raw = row["raw_sumo"]["steps_per_s"]
+        add(f"{town} continuous sim steps/s / raw SUMO", row["continuous"]["sim_steps_per_s"] / raw, 0.4)
+        add(f"{town} event sim steps/s / raw SUMO", row["event"]["sim_steps_per_s"] / raw, 0.7)
+    fast = result["highway_env"].get("highway-fast-v0")
+    if fast:
+        for town, row in result["towns"].items():
+            add(f"{town} event decisions/s / highway-fast-v0", row["event"]["decisions_per_s"] / fast["decisions_per_s"], 10.0)
+            add(f"{town} continuous decisions/s / highway-fast-v0",
+                row["continuous"]["decisions_per_s"] / fast["decisions_per_s"], 5.0)
+    scaling = {row["workers"]: row for row in result["scaling"]}
+    if 1 in scaling and 2 in scaling:
+        add("2 workers / 1 worker decisions/s", scaling[2]["decisions_per_s"] / scaling[1]["decisions_per_s"], 1.7)
+    return checks
+
+
+# ------------------------------------------------------------------ driver
+def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
+    """Every measurement of ``cfg`` in one run; the JSON-ready result (see the module doc)."""
+    from tqdm import tqdm
+
+    jobs = [("raw", t, None) for t in cfg.towns] + [("env", t, f) for t in cfg.towns for f in FIDELITIES]
+    jobs += [("highway", None, e) for e in (HIGHWAY_ENVS if cfg.highway_seconds > 0 else ())]
+    jobs += [("scaling", None, n) for n in cfg.scaling_workers]
+    towns: dict[str, dict] = {t: {} for t in cfg.towns}
+    highway, scaling = {}, []
+    started = time.perf_counter()
+    with tqdm(jobs, unit="run", disable=not progress, file=sys.stderr) as bar:
+        for kind, town, what in bar:
+            bar.set_description(f"{kind} {town or ''} {what or ''}".replace("  ", " ").strip())
+            if kind == "raw":
+                towns[town]["raw_sumo"] = measure_raw_sumo(cfg, town)
+            elif kind == "env":
+                towns[town][what] = measure_env(cfg, town, what)
+            elif kind == "highway":
+                highway[what] = measure_highway(what, cfg.highway_seconds)
+            else:
+                scaling.append(measure_scaling(cfg, what))
+    result = {
+        "machine": machine_info(),
+        "config": dataclasses.asdict(cfg),
+        "scenario": f"{cfg.suite} {cfg.task} episode {cfg.episode_index}, reset seed 0, expert agent",
+        "note": "shared, noisy machine; modest durations; see hbmp_bench.bench for the method",
+        "towns": towns,
+        "highway_env": highway,
+        "scaling": scaling,
+        "bench_process_peak_rss_mb": _peak_rss_mb(),
+        "wall_s": round(time.perf_counter() - started, 1),
+    }
+    for row in towns.values():
+        raw = row["raw_sumo"]["steps_per_s"]
+        for f in FIDELITIES:
+            row[f]["ratio_to_raw"] = round(row[f]["sim_steps_per_s"] / raw, 3)
+    result["targets"] = target_checks(result)
+    return result
+
+
+def format_table(result: dict) -> str:
+    """The result as a plain-text table."""
+    m = result["machine"]
+    lines = [f"machine: {m['cpu_model']}, {m['cpu_count']} CPUs, {m['platform']}, python {m['python']}, "
+             f"SUMO {m['sumo']}, hbmp_bench {m['package_version']}",
+             f"scenario: {result['scenario']}", "",
+             f"{'what':44s} {'sim steps/s':>12s} {'decisions/s':>12s} {'ratio':>7s}"]
+    for town, row in result["towns"].items():
+        raw = row["raw_sumo"]
+        lines.append(f"{town + ' raw libsumo (' + str(raw['vehicles']) + ' veh, ' + str(raw['pedestrians']) + ' ped)':44s} "
+                     f"{raw['steps_per_s']:12.1f} {'':>12s} {1.0:7.2f}")
+        for f in FIDELITIES:
+            r = row[f]
+            lines.append(f"{town + ' env ' + f:44s} {r['sim_steps_per_s']:12.1f} {r['decisions_per_s']:12.1f} "
+                         f"{r['ratio_to_raw']:7.3f}")
+    for env_id, r in result["highway_env"].items():
+        lines.append(f"{'highway-env ' + env_id:44s} {r['sim_steps_per_s']:12.1f} {r['decisions_per_s']:12.1f}")
+    for r in result["scaling"]:
+        lines.append(f"{str(r['workers']) + ' worker(s) ' + r['town'] + ' ' + r['fidelity'] + ' random':44s} "
+                     f"{r['sim_steps_per_s']:12.1f} {r['decisions_per_s']:12.1f}   peak {r['peak_rss_mb_per_process']} MB/process")
+    lines += ["", f"{'latency [ms]':44s} {'median':>12s} {'p95':>12s} {'n':>7s}"]
+    for town, row in result["towns"].items():
+        for f in FIDELITIES:
+            for name, s in row[f]["latency"].items():
+                if s["n"]:
+                    lines.append(f"{town + ' ' + f + ' ' + name:44s} {s['median_ms']:12.3f} {s['p95_ms']:12.3f} {s['n']:7d}")
+    lines += ["", "targets:"]
+    for c in result["targets"]:
+        lines.append(f"  {'PASS' if c['passed'] else 'FAIL'}  {c['name']:48s} {c['value']:8.3f} (>= {c['target']})")
+    lines.append(f"\nwhole run: {result['wall_s']} s")
+    return "\n".join(lines)
+
+
+def write_json(result: dict, path: str | Path) -> Path:
+    """Write ``result`` to ``path`` atomically (temp file, then rename)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+    try:
+        with os.fdopen(fd, "w") as fh:
+            json.dump(result, fh, indent=2)
+            fh.write("\n")
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def profile_continuous(cfg: BenchConfig, town: str, seconds: float, top: int = 25) -> str:
+    """cProfile of the continuous env's step path (expert agent) for ``seconds``; top functions by own time."""
+    profiler = cProfile.Profile()
+    profiler.enable()
+    measure_env(cfg, town, "continuous", seconds=seconds)
+    profiler.disable()
+    out = io.StringIO()
+    pstats.Stats(profiler, stream=out).sort_stats("tottime").print_stats(top)
+    return out.getvalue()
+
+
+# --------------------------------------------------------------------- CLI
+def _cmd_bench(args: argparse.Namespace) -> int:
+    cfg = BenchConfig.quick() if args.quick else BenchConfig()
+    if args.profile:
+        print(profile_continuous(cfg, cfg.towns[0], args.profile))
+        return 0
+    result = run_benchmark(cfg, progress=not args.json)
+    if args.out:
+        write_json(result, args.out)
+    print(json.dumps(result, indent=2) if args.json else format_table(result))
+    return 0
+
+
+def add_commands(subparsers) -> None:
+    p = subparsers.add_parser("bench", help="throughput against raw SUMO and highway-env (a few minutes)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON instead of a table")
+    p.add_argument("--quick", action="store_true", help="a few seconds per part: checks that everything runs")
+    p.add_argument("--out", default=None, help="also write the JSON result to this file")
+    p.add_argument("--profile", type=float, default=0.0, metavar="SECONDS",
+                   help="instead: cProfile the continuous env's step path for SECONDS and print the top costs")
+    p.set_defaults(func=_cmd_bench)
