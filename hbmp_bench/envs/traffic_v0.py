@@ -1,0 +1,197 @@
+"""PettingZoo environment: the ego and background traffic as agents of the behavior layer.
+
+Usage::
+
+    from hbmp_bench.envs import traffic_v0
+    env = traffic_v0.parallel_env(town="Town01", task="NavigationDynamic", controlled=4)
+    observations, infos = env.reset(seed=0)
+    while env.agents:
+        actions = {a: policy(observations[a], infos[a]) for a in env.agents if infos[a]["decision_required"]}
+        observations, rewards, terminations, truncations, infos = env.step(actions)
+
+    aec = traffic_v0.env(...)   # the same through PettingZoo's parallel-to-AEC conversion
+
+## Agents
+``possible_agents = ["ego", "bg0", ..., "bg{N-1}"]``: the ego of the scenario's episode and N
+controlled background vehicles (``controlled``: ``"none"``, an int N, or ``"all"`` of the episode's
+background vehicles); the others stay with SUMO's own driver models. The slots are fixed for the
+episode: background agents circulate (their routes are extended and re-planned, never finished),
+so an agent never disappears and comes back. Pedestrians walk the sidewalks and cross at crossings;
+they are obstacles in every agent's M_t.
+
+## Spaces
+Every agent: action ``Discrete(5)`` (speed_up, speed_down, change_left, change_right, keep;
+infeasible lane changes run as keep, ``info["action_mask"]``), observation
+``Dict(occupancy=Box(0, 1, (1, rows, cols)), road=Box(0, 2, (10,)))`` = M_t and R_t from the
+agent's own point of view (R_t of a background agent follows its own circulating route).
+
+## Decision timing
+Behaviors last different times (continuous fidelity: 1-8 s; event: one decision period). ``step``
+begins a behavior for every agent whose ``info["decision_required"]`` is True and returns as soon as
+any agent's behavior has ended (or the episode ends, or an agent crashes). Agents still executing
+their behavior get ``decision_required = False``; their entry in the next ``actions`` is optional
+and ignored. The ego runs ``ego_fidelity`` (default continuous), background agents
+``background_fidelity`` (default event: each behavior = one 0.1 s step).
+
+## Rewards, ends, infos
+Per agent, the single-ego definition: r_T when an event happens (collision −50, red light −10,
+wrong lane / off-road −1; the ego also +100 goal and −50 timeout), plus, with ``reward="dense"``,
+r_k = λ(c̃_total) when the agent's behavior ends (0 in event fidelity). The ego ends by its
+episode's rules (``DrivingWorld``); a background agent is terminated only by its own collision
+(its vehicle then leaves SUMO); when the ego's episode ends every other live agent is truncated.
+``info``: ``decision_required``, ``action_mask``, ``events`` and ``infractions`` (its own),
+``scene`` (privileged quantities the expert reads), ``reward_components``, ``time_s``.
+
+## Bad input
+An action for an agent that is not live (unknown or finished) raises ValueError naming the live
+agents; a missing action for an agent with ``decision_required`` raises ValueError; an action
+outside 0..4 raises ValueError.
+
+## Implementation
+One implementation with the gymnasium ``BehaviorEnv``: both run on ``DrivingWorld``; this env adds
+the background agents through :class:`hbmp_bench.envs.multi.TrafficWorld`. With
+``controlled="none"`` it reproduces the single-ego env step for step.
+
+## Version history
+v0: first release.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from pettingzoo import ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec
+
+from hbmp_bench.envs.multi import TrafficWorld
+from hbmp_bench.envs.observation import ROAD_FEATURES, ObservationConfig
+from hbmp_bench.envs.world import BEHAVIORS, WorldConfig
+from hbmp_bench.scenarios import check_task, check_town, get_suite, suite_episodes, traffic_for
+
+
+def _controlled_count(controlled: str | int, vehicles: int) -> int:
+    if controlled == "none":
+        return 0
+    if controlled == "all":
+        return vehicles
+    if isinstance(controlled, (int, np.integer)) and not isinstance(controlled, bool):
+        if not 0 <= int(controlled) <= vehicles:
+            raise ValueError(f"controlled must be in [0, {vehicles}] (the episode's background vehicles), "
+                             f"got {controlled}")
+        return int(controlled)
+    raise ValueError(f"controlled must be 'none', 'all' or an int, got {controlled!r}")
+
+
+class TrafficParallelEnv(ParallelEnv):
+    """The multi-agent traffic environment; see the module docstring.
+
+    Args:
+        town, task, suite: the scenario (as :class:`~hbmp_bench.envs.BehaviorEnv`).
+        episode_index: fix one episode of the list; None draws one per reset seed.
+        controlled: ``"none"``, an int N or ``"all"``: background vehicles driven by agents.
+        ego_fidelity / background_fidelity: ``continuous`` or ``event``.
+        reward: ``dense`` (r_k + r_T) or ``sparse`` (r_T).
+        density: override background traffic (``empty``, ``corl``, ``regular``, ``dense``).
+        observation: ``deformed`` or ``vehicle_centric`` M_t.
+        render_mode: only None.
+    """
+
+    metadata = {"name": "hbmp_traffic_v0", "render_modes": [], "is_parallelizable": True}
+
+    def __init__(self, town: str = "Town01", task: str = "NavigationDynamic", suite: str = "corl2017",
+                 episode_index: int | None = None, controlled: str | int = "all",
+                 ego_fidelity: str = "continuous", background_fidelity: str = "event", reward: str = "dense",
+                 density: str | None = None, observation: str = "deformed", render_mode: str | None = None):
+        if render_mode is not None:
+            raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None")
+        self.town, self.task, self.suite = check_town(town), check_task(task), get_suite(suite)
+        episodes = suite_episodes(self.suite.name, self.town, self.task)
+        if density is not None:
+            traffic = traffic_for(self.town, self.task, density)
+            episodes = tuple(dataclasses.replace(e, traffic=traffic) for e in episodes)
+        if episode_index is not None and not 0 <= episode_index < len(episodes):
+            raise ValueError(f"episode_index must be in [0, {len(episodes)}), got {episode_index}")
+        self.episodes, self.episode_index = episodes, episode_index
+        vehicles = min(e.traffic.vehicles for e in (episodes if episode_index is None else episodes[episode_index:episode_index + 1]))
+        if background_fidelity not in ("event", "continuous"):
+            raise ValueError(f"background_fidelity must be 'event' or 'continuous', got {background_fidelity!r}")
+        self.n_controlled = _controlled_count(controlled, vehicles)
+        obs_cfg = ObservationConfig(kind=observation)
+        self.config = WorldConfig(fidelity=ego_fidelity, reward=reward, observation=obs_cfg)
+        self.background_fidelity = background_fidelity
+        self.possible_agents = ["ego", *(f"bg{k}" for k in range(self.n_controlled))]
+        self.agents: list[str] = []
+        self._observation_space = spaces.Dict(
+            occupancy=spaces.Box(0.0, 1.0, (1, obs_cfg.rows, obs_cfg.cols), dtype=np.float32),
+            road=spaces.Box(0.0, 2.0, (len(ROAD_FEATURES),), dtype=np.float32),
+        )
+        self._action_space = spaces.Discrete(len(BEHAVIORS))
+        self.render_mode = None
+        self._world: TrafficWorld | None = None
+        self._rng = np.random.default_rng()
+
+    def observation_space(self, agent: str) -> spaces.Dict:
+        return self._observation_space
+
+    def action_space(self, agent: str) -> spaces.Discrete:
+        return self._action_space
+
+    @property
+    def world(self) -> TrafficWorld:
+        if self._world is None:
+            self._world = TrafficWorld(self.town, self.config, self.n_controlled, self.background_fidelity)
+        return self._world
+
+    def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
+        if seed is not None or self._world is None:
+            self._rng = np.random.default_rng(seed)
+        index = (options or {}).get("episode_index", self.episode_index)
+        if index is None:
+            index = int(self._rng.integers(len(self.episodes)))
+        obs, infos = self.world.start(self.episodes[index], seed=int(self._rng.integers(2**31)))
+        self.agents = list(self.world.live)
+        return obs, infos
+
+    def step(self, actions: dict[str, Any]):
+        if not self.agents:
+            raise RuntimeError("call reset() before step() (and again after the episode ends)")
+        live = set(self.agents)
+        stray = sorted(set(actions) - live)
+        if stray:
+            raise ValueError(f"actions for agents that are not live: {stray}; live agents: {self.agents}")
+        world = self.world
+        missing = [a for a in self.agents if world.needs_decision(a) and actions.get(a) is None]
+        if missing:
+            raise ValueError(f"agents {missing} need a decision (info['decision_required']) but got no action")
+        clean = {}
+        for agent in self.agents:
+            if world.needs_decision(agent):
+                action = actions[agent]
+                if not (isinstance(action, (int, np.integer)) and 0 <= int(action) < len(BEHAVIORS)):
+                    raise ValueError(f"action of {agent} must be an int in [0, {len(BEHAVIORS)}) "
+                                     f"({', '.join(BEHAVIORS)}), got {action!r}")
+                clean[agent] = int(action)
+        result = world.step(clean)
+        self.agents = list(world.live)
+        return result
+
+    def close(self) -> None:
+        if self._world is not None:
+            self._world.close()
+        self.agents = []
+
+
+def parallel_env(**kwargs) -> TrafficParallelEnv:
+    """The parallel env (see :class:`TrafficParallelEnv` for the arguments)."""
+    return TrafficParallelEnv(**kwargs)
+
+
+def env(**kwargs):
+    """The AEC env through PettingZoo's ``parallel_to_aec``."""
+    return parallel_to_aec(TrafficParallelEnv(**kwargs))
+
+
+raw_env = TrafficParallelEnv
