@@ -1,6 +1,7 @@
-"""Agents: the protocol, the registry and the built-in agents (expert, random, keep)."""
+"""Agents: the protocol, the registry, the built-in agents (expert, random, keep) and the learned
+ones (il, hbmp, hbmp-s, flat; torch loads only when one is made)."""
 
-from hbmp_bench.agents import expert, simple  # noqa: F401  (registration)
+from hbmp_bench.agents import expert, learned, simple  # noqa: F401  (registration)
 from hbmp_bench.agents.base import AGENTS, Agent, load_agent, register_agent
 
 __all__ = ["AGENTS", "Agent", "load_agent", "register_agent"]

@@ -40,9 +40,14 @@ def register_agent(name: str) -> Callable[[Callable[..., Agent]], Callable[..., 
 
 
 def load_agent(spec: str, **kwargs: Any) -> Agent:
-    """An agent from a registry name (``expert``) or a ``module:Class`` plug-in path."""
+    """An agent from a registry name (``expert``), a ``module:Class`` plug-in path, or a trained
+    checkpoint file (a path ending in ``.pt``, see :mod:`hbmp_bench.agents.learned`)."""
     if spec in AGENTS:
         return AGENTS[spec](**kwargs)
+    if spec.endswith(".pt"):
+        from hbmp_bench.agents.learned import LearnedAgent
+
+        return LearnedAgent(spec, **kwargs)
     if ":" in spec:
         module_name, _, attr = spec.partition(":")
         try:
@@ -53,4 +58,4 @@ def load_agent(spec: str, **kwargs: Any) -> Agent:
         if not isinstance(agent, Agent):
             raise TypeError(f"{spec} does not implement the Agent protocol (name, reset(info), act(observation, info))")
         return agent
-    raise UnknownNameError("agent", spec, [*AGENTS, "<module:Class>"])
+    raise UnknownNameError("agent", spec, [*AGENTS, "<module:Class>", "<path/to/checkpoint.pt>"])

@@ -1,0 +1,123 @@
+"""Learned agents: il (DAgger), hbmp (PPO, r_k + r_T), hbmp-s (PPO, r_T only) and flat (PPO on controls).
+
+Each loads a checkpoint shipped in ``hbmp_bench/agents/checkpoints/<name>.pt`` (with a model card
+``<name>.md`` beside it), produced by the package's own ``hbmp-bench train <name>``; any other
+checkpoint loads with ``load_agent("path/to/policy.pt")``. Files are read with
+``torch.load(weights_only=True)``; torch is imported only when a learned agent is made.
+
+The policy acts greedily (its most likely behavior). A checkpoint records the observation it was
+trained on (``env_kwargs``): evaluate a vehicle-centric policy on an env made with
+``observation="vehicle_centric"``.
+"""
+
+from __future__ import annotations
+
+import os
+from importlib import resources
+from typing import Any
+
+import numpy as np
+
+from hbmp_bench.agents.base import register_agent
+
+TRAIN_COMMANDS = {
+    "il": "hbmp-bench train il --episodes 150 --workers 2 --seed 0 --density regular --out runs/il",
+    "hbmp": "hbmp-bench train hbmp --episodes 6000 --workers 2 --seed 0 --density regular --out runs/hbmp",
+    "hbmp-s": "hbmp-bench train hbmp-s --episodes 6000 --workers 2 --seed 0 --density regular --out runs/hbmp-s",
+    "flat": "hbmp-bench train flat --episodes 6000 --workers 2 --seed 0 --density regular --out runs/flat",
+}
+"""How each shipped checkpoint is (re)produced; the model card beside it has the exact command used."""
+
+OBSERVATION_OPTIONS = ("observation",)
+"""Environment options that change what the policy sees (so an evaluation must match them)."""
+
+
+def shipped_checkpoint(name: str) -> str:
+    """Path of the checkpoint shipped for ``name``; a clear error naming the train command if absent."""
+    if name not in TRAIN_COMMANDS:
+        from hbmp_bench.errors import UnknownNameError
+
+        raise UnknownNameError("learned agent", name, TRAIN_COMMANDS)
+    path = str(resources.files("hbmp_bench.agents") / "checkpoints" / f"{name}.pt")
+    if not os.path.isfile(path):
+        raise FileNotFoundError(
+            f"no shipped checkpoint for agent {name!r} (hbmp_bench/agents/checkpoints/{name}.pt). Produce it with "
+            f"`{TRAIN_COMMANDS[name]}`, then copy runs/{name}/policy.pt to that place, or load any checkpoint "
+            f"with --agent path/to/policy.pt")
+    return path
+
+
+class LearnedAgent:
+    """A trained policy from a checkpoint file.
+
+    Args:
+        checkpoint: path of a ``.pt`` file written by ``hbmp-bench train``.
+        name: agent name in records (default: the checkpoint's kind, or the file name).
+        device: torch device.
+
+    Attributes:
+        kind: ``il``, ``hbmp``, ``hbmp-s`` or ``flat``.
+        env_kwargs: the observation options the policy needs from the env (``observation``), to
+            pass to ``make``; empty for the default deformed M_t.
+        trained_env: every environment option of its training run (id, fidelity, density ...).
+    """
+
+    def __init__(self, checkpoint: str, name: str | None = None, device: str = "cpu"):
+        import torch
+
+        from hbmp_bench.training.checkpoints import build_actor, load_checkpoint
+
+        ckpt = load_checkpoint(checkpoint)
+        self.checkpoint = checkpoint
+        self.kind = ckpt["kind"]
+        self.name = name or self.kind
+        model = ckpt["model"]
+        self.trained_env = dict(model["env"])
+        self.env_kwargs = {k: v for k, v in self.trained_env.items() if k in OBSERVATION_OPTIONS}
+        self.discrete = model["action_space"] == "discrete"
+        mask_group = model["actor"].get("action_mask_group")
+        self._groups = list(model["obs_groups"]["actor"]) + ([mask_group] if mask_group else [])
+        self._torch = torch
+        self.device = device
+        self.actor = build_actor(ckpt).to(device)
+
+    def reset(self, info: dict[str, Any]) -> None:
+        pass
+
+    def _batch(self, observation: dict[str, Any], info: dict[str, Any]):
+        from tensordict import TensorDict
+
+        torch = self._torch
+        groups = {}
+        for key in self._groups:
+            value = info["action_mask"] if key == "action_mask" and key not in observation else observation[key]
+            groups[key] = torch.as_tensor(np.asarray(value, dtype=np.float32), device=self.device).unsqueeze(0)
+        return TensorDict(groups, batch_size=[1], device=self.device)
+
+    def act(self, observation: dict[str, Any], info: dict[str, Any]):
+        """The behavior index (int) for behavior policies; the control vector (np.ndarray) for ``flat``."""
+        with self._torch.inference_mode():
+            out = self.actor(self._batch(observation, info))[0]
+        if self.discrete:
+            return int(out.item())
+        return out.cpu().numpy()
+
+    def behavior_probabilities(self, observation: dict[str, Any], info: dict[str, Any]) -> np.ndarray:
+        """(5,) the policy's behavior probabilities (behavior policies only)."""
+        if not self.discrete:
+            raise ValueError(f"{self.kind!r} is not a behavior policy")
+        with self._torch.inference_mode():
+            logits = self.actor.distribution_input(self._batch(observation, info))[0]
+        return self._torch.softmax(logits, -1).cpu().numpy()
+
+
+def _shipped(name: str):
+    def make(checkpoint: str | None = None, **kwargs: Any) -> LearnedAgent:
+        return LearnedAgent(checkpoint or shipped_checkpoint(name), name=name, **kwargs)
+
+    make.__doc__ = f"The shipped ``{name}`` policy (``checkpoint=`` loads another file instead)."
+    return make
+
+
+for _name in TRAIN_COMMANDS:
+    register_agent(_name)(_shipped(_name))

@@ -1,0 +1,97 @@
+"""Checkpoint files: plain state dicts and config dicts, loadable with ``torch.load(weights_only=True)``.
+
+A checkpoint is a dict:
+
+    format               CHECKPOINT_FORMAT
+    kind                 "il", "hbmp", "hbmp-s" or "flat"
+    model                {"actor": rsl-rl model config, "critic": ..., "obs_shapes": {group: [dims]},
+                          "obs_groups": {"actor": [...], "critic": [...]}, "num_actions": int,
+                          "action_space": "discrete" | "box", "env": {env id and options}}
+    actor_state_dict     the policy's weights
+    critic_state_dict    the value network's weights (PPO; absent for il)
+    optimizer_state_dict to resume (absent in the shipped policy files)
+    progress             {"episodes", "decisions", "iterations", "wall_s"}
+    train                the training options and the command that produced it
+
+Only str, int, float, bool, None, lists and dicts of them, and tensors go in, so the file loads
+under ``weights_only=True``.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from typing import Any
+
+import torch
+
+CHECKPOINT_FORMAT = "hbmp_bench.checkpoint.v1"
+KINDS = ("il", "hbmp", "hbmp-s", "flat")
+PLAIN_TYPES = (str, int, float, bool, type(None))
+
+
+def _check_plain(value: Any, where: str) -> None:
+    if isinstance(value, PLAIN_TYPES) or isinstance(value, torch.Tensor):
+        return
+    if isinstance(value, (list, tuple)):
+        for k, v in enumerate(value):
+            _check_plain(v, f"{where}[{k}]")
+        return
+    if isinstance(value, dict):
+        for k, v in value.items():
+            if not isinstance(k, (str, int)):
+                raise ValueError(f"checkpoint key {where}.{k!r} must be a str or int")
+            _check_plain(v, f"{where}.{k}")
+        return
+    raise ValueError(f"checkpoint entry {where} has type {type(value).__name__}; only plain values and tensors "
+                     "are stored so the file loads with weights_only=True")
+
+
+def save_checkpoint(path: str, checkpoint: dict[str, Any]) -> None:
+    """Write ``checkpoint`` atomically (temp file in the same folder, then rename)."""
+    checkpoint = {"format": CHECKPOINT_FORMAT, **checkpoint}
+    if checkpoint.get("kind") not in KINDS:
+        raise ValueError(f"checkpoint kind must be one of {KINDS}, got {checkpoint.get('kind')!r}")
+    _check_plain(checkpoint, "checkpoint")
+    folder = os.path.dirname(os.path.abspath(path))
+    os.makedirs(folder, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=".ckpt-", suffix=".tmp", dir=folder)
+    os.close(fd)
+    try:
+        torch.save(checkpoint, tmp)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes it private; a checkpoint is an ordinary file
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise
+
+
+def load_checkpoint(path: str, kinds: tuple[str, ...] = KINDS) -> dict[str, Any]:
+    """Read a checkpoint with ``weights_only=True``; its kind must be in ``kinds``."""
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"no checkpoint file {path!r}")
+    checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+    if not isinstance(checkpoint, dict) or checkpoint.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{path!r} is not an hbmp_bench checkpoint (format {CHECKPOINT_FORMAT})")
+    if checkpoint.get("kind") not in kinds:
+        raise ValueError(f"{path!r} holds a {checkpoint.get('kind')!r} policy; expected one of {kinds}")
+    return checkpoint
+
+
+def policy_only(checkpoint: dict[str, Any]) -> dict[str, Any]:
+    """The checkpoint without the optimizer state (what ships with the package)."""
+    return {k: v for k, v in checkpoint.items() if k not in ("optimizer_state_dict", "format")}
+
+
+def build_actor(checkpoint: dict[str, Any]):
+    """The policy network of a checkpoint, weights loaded, in eval mode."""
+    from hbmp_bench.training.models import build_model
+
+    model = checkpoint["model"]
+    shapes = {k: tuple(v) for k, v in model["obs_shapes"].items()}
+    actor = build_model(model["actor"], shapes, model["obs_groups"], "actor", model["num_actions"])
+    actor.load_state_dict(checkpoint["actor_state_dict"])
+    return actor.eval()

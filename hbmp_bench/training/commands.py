@@ -1,0 +1,146 @@
+"""``hbmp-bench train {il,hbmp,hbmp-s,flat}`` and ``hbmp-bench curves``.
+
+    hbmp-bench train il     --episodes N --workers W --seed S --out DIR   DAgger, event fidelity
+    hbmp-bench train hbmp   ... [--init il|CKPT|none]                     PPO, r_k + r_T, continuous fidelity
+    hbmp-bench train hbmp-s ...                                           PPO, r_T only
+    hbmp-bench train flat   ...                                           PPO on acceleration and steering
+    hbmp-bench curves DIR [DIR ...] --labels ... --out fig.png             r_T and r_T + Σr_t of several runs
+
+Ablations: ``--init none`` (random instead of IL initialisation), ``--observation vehicle_centric``
+(non-deformed M_t).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import os
+import shlex
+import time
+
+from hbmp_bench.training.checkpoints import KINDS
+
+DEFAULT_EPISODES = {"il": 3000, "hbmp": 6000, "hbmp-s": 6000, "flat": 6000}
+"""Paper: 6000 RL episodes; DAgger's α starts decaying after 3000 (its IL budget is not given)."""
+DEFAULT_FIDELITY = {"il": "event", "hbmp": "continuous", "hbmp-s": "continuous", "flat": None}
+REWARD = {"il": "dense", "hbmp": "dense", "hbmp-s": "sparse", "flat": "env"}
+CONTROL_ENV = "hbmp_bench.envs.control_env:ControlEnv"
+
+
+def _command_line(args: argparse.Namespace) -> str:
+    """The command as a user would type it (for the model card)."""
+    parts = ["hbmp-bench", "train", args.kind, "--scenario", args.scenario, "--episodes", str(args.episodes),
+             "--workers", str(args.workers), "--seed", str(args.seed), "--out", args.out]
+    for flag, value in (("--fidelity", args.fidelity), ("--observation", args.observation),
+                        ("--density", args.density), ("--init", args.init), ("--resume", args.resume)):
+        if value is not None:
+            parts += [flag, value]
+    if args.mask_actions:
+        parts.append("--mask-actions")
+    return " ".join(shlex.quote(p) for p in parts)
+
+
+def resolve_init(kind: str, init: str | None) -> str | None:
+    """The checkpoint that initialises a PPO actor: a path, a shipped name, or None (random)."""
+    if kind == "il":
+        if init not in (None, "none"):
+            raise ValueError("--init does not apply to il (DAgger starts from a random network)")
+        return None
+    if init is None:
+        init = "il" if kind in ("hbmp", "hbmp-s") else "none"
+    if init == "none":
+        return None
+    if kind == "flat":
+        raise ValueError("the flat baseline has no behavior layer to initialise from; use --init none")
+    if init.endswith(".pt"):
+        if not os.path.isfile(init):
+            raise FileNotFoundError(f"no checkpoint file {init!r}")
+        return init
+    from hbmp_bench.agents.learned import shipped_checkpoint
+
+    return shipped_checkpoint(init)
+
+
+def _cmd_train(args: argparse.Namespace) -> int:
+    from hbmp_bench.training.run import RunConfig
+    from hbmp_bench.training.worker import WorkerEnvConfig
+
+    kind = args.kind
+    if args.episodes is None:
+        args.episodes = DEFAULT_EPISODES[kind]
+    if args.out is None:
+        args.out = os.path.join("runs", f"{kind}__{args.scenario.split('/')[-1]}__{args.seed}__{int(time.time())}")
+    if args.fidelity is None:
+        args.fidelity = DEFAULT_FIDELITY[kind]
+    env_kwargs = {k: v for k, v in (("fidelity", args.fidelity), ("observation", args.observation),
+                                    ("density", args.density)) if v is not None}
+    entry_point = None
+    if kind == "flat":
+        if importlib.util.find_spec(CONTROL_ENV.split(":")[0]) is None:
+            raise ValueError("train flat needs the continuous-control env hbmp_bench.envs.control_env.ControlEnv, "
+                             "which this installation does not have yet")
+        entry_point = CONTROL_ENV
+    init = resolve_init(kind, args.init) if args.resume is None else None
+    env_config = WorkerEnvConfig(env_id=args.scenario, env_kwargs=env_kwargs, entry_point=entry_point,
+                                 reward=REWARD[kind])
+    run = RunConfig(kind=kind, episodes=args.episodes, out=args.out, workers=args.workers, seed=args.seed,
+                    save_every=args.save_every, resume=args.resume, command=_command_line(args),
+                    progress=not args.no_progress)
+    if kind == "il":
+        from hbmp_bench.training.dagger import DaggerConfig, train_dagger
+
+        result = train_dagger(run, env_config, DaggerConfig(mask_actions=args.mask_actions))
+    else:
+        from hbmp_bench.training.ppo import PPOConfig, train_ppo
+
+        label = None if init is None else (args.init or "il")
+        result = train_ppo(run, env_config, PPOConfig(mask_actions=args.mask_actions), init=init, init_label=label)
+    p = result["progress"]
+    print(f"trained {kind}: {p['episodes']} episodes, {p['decisions']} decisions, {p['wall_s'] / 60:.1f} min")
+    print(f"run folder: {args.out}  (episodes.csv, curves.png, checkpoint.pt, MODEL_CARD.md)")
+    print(f"policy: {result['policy']}  (evaluate: hbmp-bench run --agent {result['policy']})")
+    return 0
+
+
+def _cmd_curves(args: argparse.Namespace) -> int:
+    from hbmp_bench.training.runlog import plot_comparison
+
+    labels = args.labels or [os.path.basename(os.path.normpath(d)) for d in args.runs]
+    for folder in args.runs:
+        if not os.path.isfile(os.path.join(folder, "episodes.csv")):
+            raise FileNotFoundError(f"no episodes.csv in {folder!r}")
+    print(plot_comparison(args.runs, labels, args.out, window=args.window))
+    return 0
+
+
+def add_commands(subparsers) -> None:
+    """Add ``train`` and ``curves`` to the ``hbmp-bench`` parser."""
+    p = subparsers.add_parser("train", help="train il (DAgger), hbmp, hbmp-s or flat (PPO, rsl-rl)",
+                              description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("kind", choices=KINDS)
+    p.add_argument("--scenario", default="hbmp_bench/Training-v0", help="env id (default: Town03, random goals)")
+    p.add_argument("--episodes", type=int, default=None,
+                   help="episode budget (default: il 3000, others 6000 as in the paper)")
+    p.add_argument("--workers", type=int, default=2, help="environment processes (one SUMO each)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default=None, help="run folder (default: runs/<kind>__<scenario>__<seed>__<time>)")
+    p.add_argument("--init", default=None,
+                   help="hbmp/hbmp-s actor initialisation: 'il' (shipped, default), a .pt checkpoint, or 'none'")
+    p.add_argument("--resume", default=None, help="continue from a run's checkpoint.pt")
+    p.add_argument("--observation", choices=("deformed", "vehicle_centric"), default=None,
+                   help="M_t kind (default: the env's, deformed)")
+    p.add_argument("--fidelity", default=None,
+                   help="env fidelity (default: il event, hbmp/hbmp-s continuous; flat: the control env's)")
+    p.add_argument("--density", default=None, help="background traffic (empty, corl, regular, dense; default: the "
+                                                    "scenario's)")
+    p.add_argument("--mask-actions", action="store_true", help="mask infeasible behaviors in the policy")
+    p.add_argument("--save-every", type=int, default=50, help="checkpoint every N episodes")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=_cmd_train)
+
+    p = subparsers.add_parser("curves", help="one PNG of r_T and r_T + Σr_t per episode for several training runs")
+    p.add_argument("runs", nargs="+", help="run folders (each with episodes.csv)")
+    p.add_argument("--labels", nargs="*", default=None)
+    p.add_argument("--out", default="training_curves.png")
+    p.add_argument("--window", type=int, default=50, help="moving-average window [episodes]")
+    p.set_defaults(func=_cmd_curves)

@@ -1,0 +1,263 @@
+"""PPO with rsl-rl for the behavior policy (hbmp, hbmp-s) and the flat control baseline.
+
+rsl-rl's ``OnPolicyRunner`` and ``PPO`` do the learning; this module supplies the environment
+(:class:`~hbmp_bench.training.vec_env.SubprocVecEnv`), the paper's network and hyper-parameters,
+and the bookkeeping of a run (episode CSV, checkpoints, resume, curves, model card).
+
+Deviations from the paper, and why:
+- Two learning rates. rsl-rl's PPO has one optimizer; :class:`TwoRatePPO` gives it two Adam
+  parameter groups, the actor's at ``LR_a`` = 1e-4 and the critic's at ``LR_c`` = 5e-4. Actor and
+  critic share no weights, so this is the same as two Adam optimizers. The learning rate is
+  fixed (rsl-rl's adaptive KL schedule would set both groups to one rate).
+- Batch size 32 is the mini-batch: each iteration collects ``num_steps_per_env`` decisions in
+  each worker and splits them into mini-batches of 32.
+- Not given in the paper, rsl-rl's defaults kept: GAE λ = 0.95, 5 epochs per iteration, entropy
+  coefficient 0.01, value-loss coefficient 1, gradient-norm clip 1, clipped value loss.
+- Rewards are scaled by ``reward_scale`` = 0.01 for learning (r_T is ±100 / −50, which the
+  clipped value loss would follow only slowly); advantages are normalised, so the policy
+  gradient does not depend on the scale. Logs keep the unscaled rewards.
+- Discounting is per decision (the paper's approximation γ^{t_k} ≈ γ^k).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import io
+import os
+import warnings
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+from rsl_rl.algorithms import PPO
+from rsl_rl.utils import resolve_optimizer
+
+from hbmp_bench.training.checkpoints import load_checkpoint, policy_only, save_checkpoint
+from hbmp_bench.training.models import behavior_model_cfgs, control_model_cfgs, observation_shapes
+from hbmp_bench.training.run import Progress, RunConfig, episode_row, final_results, progress_bar
+from hbmp_bench.training.runlog import EPISODE_COLUMNS, CsvLog, plot_run, write_model_card
+from hbmp_bench.training.worker import WorkerEnvConfig
+
+MASK_GROUP = "action_mask"
+
+
+class TwoRatePPO(PPO):
+    """rsl-rl PPO with separate learning rates for the actor and the critic.
+
+    Args:
+        actor_learning_rate: Adam learning rate of the actor's parameters (paper: 1e-4).
+        critic_learning_rate: Adam learning rate of the critic's parameters (paper: 5e-4).
+        schedule: must be ``fixed``.
+        other arguments: as ``rsl_rl.algorithms.PPO``.
+    """
+
+    def __init__(self, actor, critic, storage, actor_learning_rate: float = 1e-4, critic_learning_rate: float = 5e-4,
+                 optimizer: str = "adam", schedule: str = "fixed", **kwargs: Any) -> None:
+        if schedule != "fixed":
+            raise ValueError("TwoRatePPO keeps two fixed learning rates; schedule must be 'fixed'")
+        if "learning_rate" in kwargs:
+            raise ValueError("give actor_learning_rate and critic_learning_rate instead of learning_rate")
+        super().__init__(actor, critic, storage, learning_rate=actor_learning_rate, optimizer=optimizer,
+                         schedule="fixed", **kwargs)
+        self.optimizer = resolve_optimizer(optimizer)([
+            {"params": list(self.actor.parameters()), "lr": actor_learning_rate},
+            {"params": list(self.critic.parameters()), "lr": critic_learning_rate},
+        ])
+
+
+@dataclass(frozen=True)
+class PPOConfig:
+    """PPO hyper-parameters (paper's values where it gives them).
+
+    Attributes:
+        actor_learning_rate / critic_learning_rate: LR_a and LR_c (paper: 1e-4, 5e-4).
+        clip_param: ε_clip (paper: 0.2).
+        gamma: discount per decision (paper: 0.99).
+        mini_batch_size: decisions per gradient step (paper's batch size 32).
+        num_steps_per_env: decisions collected per worker and iteration; workers × this must be
+            a multiple of ``mini_batch_size``.
+        lam, num_learning_epochs, entropy_coef, value_loss_coef, max_grad_norm: rsl-rl's defaults.
+        reward_scale: factor on the training reward (see the module notes).
+        mask_actions: mask infeasible behaviors in the policy (see :mod:`hbmp_bench.training.models`).
+        init_std: initial standard deviation of the flat baseline's Gaussian controls.
+    """
+
+    actor_learning_rate: float = 1e-4
+    critic_learning_rate: float = 5e-4
+    clip_param: float = 0.2
+    gamma: float = 0.99
+    mini_batch_size: int = 32
+    num_steps_per_env: int = 64
+    lam: float = 0.95
+    num_learning_epochs: int = 5
+    entropy_coef: float = 0.01
+    value_loss_coef: float = 1.0
+    max_grad_norm: float = 1.0
+    reward_scale: float = 0.01
+    mask_actions: bool = False
+    init_std: float = 0.5
+
+    def __post_init__(self):
+        for name in ("actor_learning_rate", "critic_learning_rate", "clip_param", "reward_scale", "init_std"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if not 0 < self.gamma <= 1 or not 0 <= self.lam <= 1:
+            raise ValueError("gamma must be in (0, 1] and lam in [0, 1]")
+        if self.mini_batch_size < 1 or self.num_steps_per_env < 1 or self.num_learning_epochs < 1:
+            raise ValueError("mini_batch_size, num_steps_per_env and num_learning_epochs must be >= 1")
+
+    def runner_cfg(self, num_envs: int, obs_groups: dict[str, list[str]], actor: dict, critic: dict) -> dict:
+        """The ``train_cfg`` dict of rsl-rl's ``OnPolicyRunner`` (a fresh dict: the runner mutates it)."""
+        batch = num_envs * self.num_steps_per_env
+        if batch % self.mini_batch_size:
+            raise ValueError(f"workers × num_steps_per_env = {batch} is not a multiple of the mini-batch "
+                             f"size {self.mini_batch_size}")
+        return {
+            "num_steps_per_env": self.num_steps_per_env,
+            "save_interval": 10**9,
+            "obs_groups": {k: list(v) for k, v in obs_groups.items()},
+            "algorithm": {
+                "class_name": "hbmp_bench.training.ppo:TwoRatePPO",
+                "actor_learning_rate": self.actor_learning_rate,
+                "critic_learning_rate": self.critic_learning_rate,
+                "clip_param": self.clip_param,
+                "gamma": self.gamma,
+                "lam": self.lam,
+                "num_learning_epochs": self.num_learning_epochs,
+                "num_mini_batches": batch // self.mini_batch_size,
+                "entropy_coef": self.entropy_coef,
+                "value_loss_coef": self.value_loss_coef,
+                "max_grad_norm": self.max_grad_norm,
+                "schedule": "fixed",
+            },
+            "actor": dict(actor),
+            "critic": dict(critic),
+        }
+
+
+def input_groups(obs) -> list[str]:
+    """Observation groups fed to the networks: all but the action mask."""
+    return [k for k in obs.keys() if k != MASK_GROUP]
+
+
+def model_info(env, actor_cfg: dict, critic_cfg: dict, groups: list[str]) -> dict[str, Any]:
+    """The ``model`` entry of a checkpoint: how to rebuild the networks without the env."""
+    from gymnasium import spaces
+
+    return {
+        "actor": actor_cfg,
+        "critic": critic_cfg,
+        "obs_shapes": {k: list(v) for k, v in observation_shapes(env.get_observations()).items()},
+        "obs_groups": {"actor": list(groups), "critic": list(groups)},
+        "num_actions": env.num_actions,
+        "action_space": "discrete" if isinstance(env.action_space, spaces.Discrete) else "box",
+        "env": {"env_id": env.config.env_id, **env.config.kwargs},
+    }
+
+
+def check_init_compatible(init: dict, info: dict) -> None:
+    """The init checkpoint's actor must fit this run's network (same inputs, same output)."""
+    theirs = init["model"]
+    for key in ("obs_groups", "num_actions", "action_space"):
+        if theirs[key] != info[key]:
+            raise ValueError(f"--init checkpoint differs in {key}: {theirs[key]} vs this run's {info[key]}")
+    for group in info["obs_groups"]["actor"]:
+        if theirs["obs_shapes"].get(group) != info["obs_shapes"][group]:
+            raise ValueError(f"--init checkpoint has {group} of shape {theirs['obs_shapes'].get(group)}, "
+                             f"this run {info['obs_shapes'][group]}")
+    ours_obs, their_obs = info["env"].get("observation", "deformed"), theirs["env"].get("observation", "deformed")
+    if ours_obs != their_obs:
+        warnings.warn(f"--init policy was trained on {their_obs} M_t, this run uses {ours_obs}", stacklevel=2)
+
+
+def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig, init: str | None = None,
+              init_label: str | None = None) -> dict[str, Any]:
+    """Train ``run.kind`` (hbmp, hbmp-s or flat) with rsl-rl PPO until ``run.episodes`` episodes.
+
+    Args:
+        run: budget, workers, seed, folder, resume.
+        env_config: environment and reward of the workers (``reward_scale`` is taken from ``ppo``).
+        ppo: hyper-parameters.
+        init: checkpoint whose actor initialises the policy (an ``il`` one for hbmp), or None.
+        init_label: how the model card and checkpoint name ``init`` (default: the path itself),
+            e.g. ``il`` for the shipped checkpoint.
+
+    Returns:
+        The run's progress dict and the path of the final policy (``policy``).
+    """
+    if run.kind == "il":
+        raise ValueError("train il with hbmp_bench.training.dagger.train_dagger")
+    env_config = dataclasses.replace(env_config, reward_scale=ppo.reward_scale, expert_labels=False)
+    resume = load_checkpoint(run.resume, kinds=(run.kind,)) if run.resume else None
+    init_ckpt = load_checkpoint(init, kinds=("il", "hbmp", "hbmp-s")) if init and resume is None else None
+    progress = Progress.from_dict(resume["progress"]) if resume else Progress()
+    if progress.episodes >= run.episodes:
+        raise ValueError(f"the checkpoint already has {progress.episodes} episodes; ask for more than that")
+    os.makedirs(run.out, exist_ok=True)
+    torch.manual_seed(run.seed + progress.episodes)
+    torch.set_num_threads(run.threads())
+
+    from rsl_rl.runners import OnPolicyRunner
+
+    from hbmp_bench.training.vec_env import SubprocVecEnv
+
+    env = SubprocVecEnv(env_config, run.workers, seed=run.seed * 1_000_003 + progress.episodes)
+    log = bar = None
+    try:
+        from gymnasium import spaces
+
+        groups = input_groups(env.get_observations())
+        discrete = isinstance(env.action_space, spaces.Discrete)
+        actor_cfg, critic_cfg = behavior_model_cfgs(ppo.mask_actions) if discrete else control_model_cfgs(ppo.init_std)
+        if ppo.mask_actions and not discrete:
+            raise ValueError("mask_actions needs a behavior env with an action mask")
+        cfg = ppo.runner_cfg(env.num_envs, {"actor": groups, "critic": groups}, actor_cfg, critic_cfg)
+        with contextlib.redirect_stdout(io.StringIO()):
+            runner = OnPolicyRunner(env, cfg, log_dir=None, device="cpu")
+        info = model_info(env, actor_cfg, critic_cfg, groups)
+        alg = runner.alg
+        if resume is not None:
+            alg.load(resume, {"actor": True, "critic": True, "optimizer": True}, strict=True)
+        elif init_ckpt is not None:
+            check_init_compatible(init_ckpt, info)
+            alg.get_policy().load_state_dict(init_ckpt["actor_state_dict"])
+        options = {"kind": run.kind, "workers": run.workers, "init": (init_label or init) if resume is None else None,
+                   **{f"env.{k}": v for k, v in info["env"].items()}, "reward": env_config.reward,
+                   **{f"ppo.{k}": v for k, v in dataclasses.asdict(ppo).items()}}
+        if resume is not None:
+            options["init"] = resume["train"].get("init")
+
+        def checkpoint() -> dict[str, Any]:
+            return {"kind": run.kind, "model": info, "actor_state_dict": alg.get_policy().state_dict(),
+                    "critic_state_dict": alg.critic.state_dict(), "optimizer_state_dict": alg.optimizer.state_dict(),
+                    "progress": progress.to_dict(), "train": {"command": run.command, "seed": run.seed, **options}}
+
+        log = CsvLog(run.path("episodes.csv"), EPISODE_COLUMNS)
+        bar = progress_bar(run, progress.episodes)
+        last_save = progress.episodes
+        while progress.episodes < run.episodes:
+            runner.learn(num_learning_iterations=1)
+            progress.iterations += 1
+            progress.decisions += cfg["num_steps_per_env"] * env.num_envs
+            for worker, summary in env.pop_episodes():
+                if progress.episodes >= run.episodes:
+                    break
+                log.write(episode_row(progress, worker, summary))
+                bar.update(1)
+            if progress.episodes - last_save >= run.save_every:
+                save_checkpoint(run.path("checkpoint.pt"), checkpoint())
+                last_save = progress.episodes
+        final = checkpoint()
+        save_checkpoint(run.path("checkpoint.pt"), final)
+        save_checkpoint(run.path("policy.pt"), policy_only(final))
+    finally:
+        env.close()
+        if log is not None:
+            log.close()
+        if bar is not None:
+            bar.close()
+    plot_run(run.out, f"{run.kind} ({env_config.reward} reward)")
+    write_model_card(run.path("MODEL_CARD.md"), run.kind, run.command, run.seed, final["progress"], options,
+                     final_results(run.path("episodes.csv")))
+    return {"progress": final["progress"], "policy": run.path("policy.pt")}

@@ -1,0 +1,128 @@
+"""What every training run shares: its options, its folder layout and its bookkeeping.
+
+Folder of a run (``out``):
+    episodes.csv     one row per finished episode (see :mod:`hbmp_bench.training.runlog`)
+    rounds.csv       DAgger only: loss and agreement with the expert per training round
+    checkpoint.pt    latest full checkpoint (weights + optimizer), for ``--resume``
+    dataset.npz      DAgger only: the aggregated dataset, for ``--resume``
+    policy.pt        the final policy without optimizer state (what ships in the package)
+    curves.png       training curves
+    MODEL_CARD.md    command, seed, episodes, wall time, machine, options, final results
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from hbmp_bench.training.checkpoints import KINDS
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    """Options common to every training kind.
+
+    Attributes:
+        kind: ``il``, ``hbmp``, ``hbmp-s`` or ``flat``.
+        episodes: episode budget of this run (total, counting episodes before a resume).
+        out: run folder.
+        workers: environment worker processes (one libsumo simulation each).
+        seed: seeds torch, the workers' environments and DAgger's mixing.
+        save_every: write ``checkpoint.pt`` every this many finished episodes.
+        resume: a ``checkpoint.pt`` to continue from (its kind must match).
+        command: the command line, for the model card.
+        progress: show a tqdm bar.
+        torch_threads: torch intra-op threads of the trainer (None: cores left by the workers, >= 1).
+    """
+
+    kind: str
+    episodes: int
+    out: str
+    workers: int = 2
+    seed: int = 0
+    save_every: int = 50
+    resume: str | None = None
+    command: str = ""
+    progress: bool = True
+    torch_threads: int | None = None
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            from hbmp_bench.errors import UnknownNameError
+
+            raise UnknownNameError("training kind", self.kind, KINDS)
+        if self.episodes < 1:
+            raise ValueError(f"episodes must be >= 1, got {self.episodes}")
+        if self.workers < 1:
+            raise ValueError(f"workers must be >= 1, got {self.workers}")
+        if self.save_every < 1:
+            raise ValueError(f"save_every must be >= 1, got {self.save_every}")
+
+    def path(self, name: str) -> str:
+        return os.path.join(self.out, name)
+
+    def threads(self) -> int:
+        if self.torch_threads is not None:
+            return max(1, self.torch_threads)
+        return max(1, (os.cpu_count() or 1) - self.workers)
+
+
+@dataclass
+class Progress:
+    """Counters of a run, carried across resumes (``wall_s`` sums the wall time of every part)."""
+
+    episodes: int = 0
+    decisions: int = 0
+    iterations: int = 0
+    wall_s: float = 0.0
+    _start: float = field(default_factory=time.perf_counter, repr=False)
+    _wall_at_start: float = 0.0
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> Progress:
+        p = cls(int(d["episodes"]), int(d["decisions"]), int(d["iterations"]), float(d["wall_s"]))
+        p._wall_at_start = p.wall_s
+        return p
+
+    def tick(self) -> None:
+        self.wall_s = self._wall_at_start + time.perf_counter() - self._start
+
+    def to_dict(self) -> dict[str, Any]:
+        self.tick()
+        return {"episodes": self.episodes, "decisions": self.decisions, "iterations": self.iterations,
+                "wall_s": round(self.wall_s, 2)}
+
+
+def episode_row(progress: Progress, worker: int, summary: dict[str, Any], **extra: Any) -> dict[str, Any]:
+    """A CSV row for a finished episode; advances the episode counter."""
+    progress.episodes += 1
+    progress.tick()
+    return {"episode": progress.episodes, "worker": worker, **summary, "wall_s": round(progress.wall_s, 1), **extra}
+
+
+def final_results(episodes_csv: str, last: int = 100) -> dict[str, Any]:
+    """Success rate, mean r_T and mean length over the last ``last`` episodes of a run."""
+    from hbmp_bench.training.runlog import read_csv
+
+    eps = read_csv(episodes_csv)
+    if not eps:
+        return {}
+    n = min(last, len(eps["episode"]))
+    return {
+        f"success rate, last {n} episodes": f"{np.mean(eps['success'][-n:]):.1%}",
+        f"mean r_T, last {n} episodes": f"{np.mean(eps['r_T'][-n:]):.1f}",
+        f"mean r_T + Σr_t, last {n} episodes": f"{np.mean(eps['r_T_plus_r_t'][-n:]):.1f}",
+        f"mean length [decisions], last {n} episodes": f"{np.mean(eps['length'][-n:]):.0f}",
+        "success rate, all episodes": f"{np.mean(eps['success']):.1%}",
+    }
+
+
+def progress_bar(config: RunConfig, initial: int):
+    from tqdm import tqdm
+
+    return tqdm(total=config.episodes, initial=min(initial, config.episodes), unit="ep", desc=f"train {config.kind}",
+                disable=not config.progress, dynamic_ncols=True)

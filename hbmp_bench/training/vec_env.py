@@ -1,0 +1,218 @@
+"""rsl-rl ``VecEnv`` over worker processes, one environment (one libsumo simulation) per worker.
+
+Observations come back as a ``TensorDict`` with batch size ``(num_envs,)`` and one group per key
+of the environment's observation dict, plus the action mask:
+
+    occupancy    (N, 1, rows, cols) float32   M_t, a 2-D group (rsl-rl sends it through CNNs)
+    road         (N, 10) float32              R_t, a 1-D group
+    action_mask  (N, 5) float32               1 = behavior feasible (only if the env reports one)
+
+Actions are ``(N, num_actions)``: for ``Discrete(5)`` ``num_actions`` is 1 and the entry is the
+behavior index (as float, rsl-rl's storage is float); for a ``Box`` they are the control values.
+Episodes reset automatically: the observation returned for a finished environment is the first
+one of its next episode, ``dones`` marks it, and ``extras["time_outs"]`` says which of the ends
+were the env's timeout (truncation), which PPO bootstraps.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+from typing import Any
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from rsl_rl.env import VecEnv
+from tensordict import TensorDict
+
+from hbmp_bench.training.worker import StepReply, WorkerEnvConfig, make_env, run_worker
+
+MAX_EPISODE_DECISIONS = 1_000_000
+"""``max_episode_length`` reported to rsl-rl: episodes end by the env's own timeout, not here."""
+
+
+class WorkerError(RuntimeError):
+    """A worker process failed, died or stopped answering."""
+
+
+class SubprocVecEnv(VecEnv):
+    """``num_envs`` environments, each in its own process.
+
+    Args:
+        config: how each worker builds its environment (id, options, reward mode, expert labels).
+        num_envs: number of worker processes (>= 1).
+        seed: base seed; worker ``i`` starts with the seed ``SeedSequence([seed, i])`` gives, later
+            episodes follow from the env's own generator, so a run is reproducible.
+        device: torch device of the returned tensors.
+        start_method: ``spawn`` (default) or ``forkserver``; never ``fork`` (libsumo, torch threads).
+        reply_timeout_s: a worker that does not answer a step within this time is an error [s].
+
+    Attributes (besides rsl-rl's): ``observation_space``, ``action_space`` (of one env),
+    ``episodes_done`` (finished episodes so far).
+    """
+
+    def __init__(self, config: WorkerEnvConfig, num_envs: int, seed: int = 0, device: str = "cpu",
+                 start_method: str = "spawn", reply_timeout_s: float = 300.0):
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        if start_method not in ("spawn", "forkserver"):
+            raise ValueError(f"start_method must be 'spawn' or 'forkserver', got {start_method!r}")
+        probe = make_env(config)  # validates the id and options here, before any process starts
+        try:
+            self.observation_space = probe.observation_space
+            self.action_space = probe.action_space
+        finally:
+            probe.close()
+        if isinstance(self.action_space, spaces.Discrete):
+            self.num_actions = 1
+        elif isinstance(self.action_space, spaces.Box) and len(self.action_space.shape) == 1:
+            self.num_actions = int(self.action_space.shape[0])
+        else:
+            raise ValueError(f"unsupported action space {self.action_space}; valid: Discrete or a 1-D Box")
+        self.config = config
+        self.num_envs = num_envs
+        self.device = device
+        self.cfg = {"env_id": config.env_id, **config.kwargs, "reward": config.reward}
+        self.max_episode_length = MAX_EPISODE_DECISIONS
+        self.episode_length_buf = torch.zeros(num_envs, dtype=torch.long, device=device)
+        self.reply_timeout_s = reply_timeout_s
+        self.episodes_done = 0
+        self._finished: list[tuple[int, dict[str, Any]]] = []
+        self._closed = False
+        context = mp.get_context(start_method)
+        self._conns, self._procs = [], []
+        try:
+            for i in range(num_envs):
+                parent, child = context.Pipe()
+                proc = context.Process(target=run_worker, args=(child, config), name=f"hbmp-env-{i}", daemon=True)
+                proc.start()
+                child.close()
+                self._conns.append(parent)
+                self._procs.append(proc)
+            for i, conn in enumerate(self._conns):
+                conn.send(("reset", int(np.random.SeedSequence([seed, i]).generate_state(1)[0])))
+            self._replies = [self._receive(i) for i in range(num_envs)]
+        except BaseException:
+            self.close()
+            raise
+        self._obs = self._stack_obs(self._replies)
+
+    # ------------------------------------------------------------ protocol
+    def _receive(self, i: int) -> StepReply:
+        conn, proc = self._conns[i], self._procs[i]
+        try:
+            if not conn.poll(self.reply_timeout_s):
+                raise WorkerError(f"training worker {i} (pid {proc.pid}) did not answer within "
+                                  f"{self.reply_timeout_s:.0f} s")
+            status, payload = conn.recv()
+        except (EOFError, ConnectionResetError, BrokenPipeError) as exc:
+            proc.join(timeout=1.0)
+            raise WorkerError(f"training worker {i} (pid {proc.pid}) died (exit code {proc.exitcode})") from exc
+        if status == "error":
+            raise WorkerError(f"training worker {i} failed: {payload}")
+        return payload
+
+    def _stack_obs(self, replies: list[StepReply]) -> TensorDict:
+        groups = {
+            key: torch.as_tensor(np.stack([r.obs[key] for r in replies]), dtype=torch.float32, device=self.device)
+            for key in replies[0].obs
+        }
+        if replies[0].action_mask is not None:
+            groups["action_mask"] = torch.as_tensor(np.stack([r.action_mask for r in replies]),
+                                                    dtype=torch.float32, device=self.device)
+        return TensorDict(groups, batch_size=[self.num_envs], device=self.device)
+
+    def _env_action(self, action: np.ndarray):
+        if self.num_actions == 1 and isinstance(self.action_space, spaces.Discrete):
+            return int(np.rint(action[0]))
+        return action.astype(self.action_space.dtype)
+
+    # --------------------------------------------------------------- VecEnv
+    def get_observations(self) -> TensorDict:
+        """The current observations, see the module docstring for the groups."""
+        return self._obs
+
+    def step(self, actions: torch.Tensor) -> tuple[TensorDict, torch.Tensor, torch.Tensor, dict]:
+        """One decision in every environment.
+
+        Args:
+            actions: (num_envs, num_actions).
+
+        Returns:
+            obs: TensorDict (num_envs,) of the next observations.
+            rewards: (num_envs,) float32 training rewards (see :data:`~hbmp_bench.training.worker.REWARD_MODES`).
+            dones: (num_envs,) long, 1 where the episode ended (the obs is then the next episode's first).
+            extras: ``time_outs`` (num_envs,) long: ended by the env's timeout; ``expert_actions``
+                (num_envs,) long: the expert's behavior for the returned obs (-1 without labels);
+                ``episodes``: ``[(env index, summary)]`` finished this step; ``log``: means of the
+                finished episodes' r_T, success and length under ``/episode/...`` (only when some ended).
+        """
+        if self._closed:
+            raise RuntimeError("the VecEnv is closed")
+        acts = actions.detach().cpu().numpy().reshape(self.num_envs, self.num_actions)
+        for i, conn in enumerate(self._conns):
+            try:
+                conn.send(("step", self._env_action(acts[i])))
+            except (BrokenPipeError, OSError) as exc:
+                raise WorkerError(f"training worker {i} (pid {self._procs[i].pid}) died "
+                                  f"(exit code {self._procs[i].exitcode})") from exc
+        replies = [self._receive(i) for i in range(self.num_envs)]
+        self._replies = replies
+        self._obs = self._stack_obs(replies)
+        rewards = torch.tensor([r.reward for r in replies], dtype=torch.float32, device=self.device)
+        dones = torch.tensor([r.terminated or r.truncated for r in replies], dtype=torch.long, device=self.device)
+        time_outs = torch.tensor([r.truncated and not r.terminated for r in replies], dtype=torch.long,
+                                 device=self.device)
+        self.episode_length_buf += 1
+        self.episode_length_buf[dones.bool()] = 0
+        episodes = [(i, r.episode) for i, r in enumerate(replies) if r.episode is not None]
+        self._finished.extend(episodes)
+        self.episodes_done += len(episodes)
+        extras: dict[str, Any] = {
+            "time_outs": time_outs,
+            "expert_actions": torch.tensor([r.expert_action for r in replies], dtype=torch.long, device=self.device),
+            "episodes": episodes,
+        }
+        if episodes:
+            extras["log"] = {
+                f"/episode/{key}": torch.tensor([float(e[key]) for _, e in episodes])
+                for key in ("r_T", "r_T_plus_r_t", "success", "infractions", "length")
+            }
+        return self._obs, rewards, dones, extras
+
+    @property
+    def expert_actions(self) -> torch.Tensor:
+        """(num_envs,) long: the expert's behavior for the current observations (-1 without labels)."""
+        return torch.tensor([r.expert_action for r in self._replies], dtype=torch.long, device=self.device)
+
+    def pop_episodes(self) -> list[tuple[int, dict[str, Any]]]:
+        """Summaries ``[(env index, summary)]`` of the episodes finished since the last call, in order."""
+        out, self._finished = self._finished, []
+        return out
+
+    # ---------------------------------------------------------------- close
+    def close(self) -> None:
+        """Close every environment and join the workers (idempotent); stragglers are terminated."""
+        if self._closed:
+            return
+        self._closed = True
+        for conn, proc in zip(self._conns, self._procs):
+            if proc.is_alive():
+                try:
+                    conn.send(("close", None))
+                    if conn.poll(10.0):
+                        conn.recv()
+                except (EOFError, BrokenPipeError, ConnectionResetError, OSError):
+                    pass
+        for conn, proc in zip(self._conns, self._procs):
+            proc.join(timeout=10.0)
+            if proc.is_alive():
+                proc.terminate()
+                proc.join(timeout=5.0)
+            conn.close()
+
+    def __enter__(self) -> SubprocVecEnv:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

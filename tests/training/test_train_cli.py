@@ -1,0 +1,112 @@
+"""``hbmp-bench train`` end to end on short Town02 routes in event fidelity: il, then hbmp from it,
+hbmp-s from scratch; outputs, weights_only checkpoints that act, resume, and clear errors."""
+
+import importlib.util
+import os
+
+import pytest
+import torch
+
+from hbmp_bench.agents import load_agent
+from hbmp_bench.cli import main
+from hbmp_bench.envs import make
+from hbmp_bench.training.runlog import EPISODE_COLUMNS, read_csv
+
+SCENARIO = "hbmp_bench/Town02-Straight-v0"
+COMMON = ["--scenario", SCENARIO, "--seed", "0", "--no-progress", "--fidelity", "event"]
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def il_run(tmp_path_factory):
+    out = str(tmp_path_factory.mktemp("train") / "il")
+    assert main(["train", "il", "--episodes", "2", "--workers", "2", "--out", out, *COMMON]) == 0
+    return out
+
+
+def _acts(policy_path):
+    agent = load_agent(policy_path)
+    env = make(SCENARIO, fidelity="event")
+    try:
+        obs, info = env.reset(seed=0, options={"episode_index": 0})
+        agent.reset(info)
+        for _ in range(5):
+            action = agent.act(obs, info)
+            assert isinstance(action, int) and 0 <= action < 5
+            obs, _, terminated, truncated, info = env.step(action)
+            assert not (terminated or truncated)
+    finally:
+        env.close()
+
+
+def _files_of_a_run(out, episodes):
+    for name in ("episodes.csv", "checkpoint.pt", "policy.pt", "curves.png", "MODEL_CARD.md"):
+        assert os.path.isfile(os.path.join(out, name)), name
+    with open(os.path.join(out, "curves.png"), "rb") as f:
+        assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+    eps = read_csv(os.path.join(out, "episodes.csv"))
+    assert set(EPISODE_COLUMNS) <= set(eps) and eps["episode"].tolist() == list(range(1, episodes + 1))
+    assert (eps["length"] > 0).all() and set(eps["success"]) <= {0.0, 1.0}
+    card = open(os.path.join(out, "MODEL_CARD.md")).read()
+    for needle in ("hbmp-bench train", "seed: 0", f"episodes: {episodes}", "wall time", "machine"):
+        assert needle in card
+    return eps
+
+
+def test_il_run_writes_log_checkpoint_curves_and_card(il_run):
+    eps = _files_of_a_run(il_run, 2)
+    assert "beta" in eps and "expert_share" in eps
+    assert os.path.isfile(os.path.join(il_run, "rounds.csv")) and os.path.isfile(os.path.join(il_run, "dataset.npz"))
+    ckpt = torch.load(os.path.join(il_run, "policy.pt"), weights_only=True)
+    assert ckpt["kind"] == "il" and "optimizer_state_dict" not in ckpt
+    assert torch.load(os.path.join(il_run, "checkpoint.pt"), weights_only=True)["optimizer_state_dict"]
+    _acts(os.path.join(il_run, "policy.pt"))
+
+
+def test_hbmp_from_il_learns_and_resumes(il_run, tmp_path):
+    out = str(tmp_path / "hbmp")
+    il_policy = os.path.join(il_run, "policy.pt")
+    assert main(["train", "hbmp", "--episodes", "2", "--workers", "1", "--out", out, "--init", il_policy,
+                 *COMMON]) == 0
+    _files_of_a_run(out, 2)
+    first = torch.load(os.path.join(out, "checkpoint.pt"), weights_only=True)
+    il = torch.load(il_policy, weights_only=True)
+    assert first["kind"] == "hbmp" and first["train"]["reward"] == "dense" and first["train"]["init"] == il_policy
+    assert any(not torch.equal(il["actor_state_dict"][k], v) for k, v in first["actor_state_dict"].items()), \
+        "PPO changed the IL-initialised policy"
+    _acts(os.path.join(out, "policy.pt"))
+
+    assert main(["train", "hbmp", "--episodes", "3", "--workers", "1", "--out", out,
+                 "--resume", os.path.join(out, "checkpoint.pt"), *COMMON]) == 0
+    second = torch.load(os.path.join(out, "checkpoint.pt"), weights_only=True)
+    assert second["progress"]["episodes"] == 3 and second["progress"]["iterations"] > first["progress"]["iterations"]
+    assert read_csv(os.path.join(out, "episodes.csv"))["episode"].tolist() == [1, 2, 3]
+    assert any(not torch.equal(first["critic_state_dict"][k], v) for k, v in second["critic_state_dict"].items()), \
+        "the value network kept learning after the resume"
+
+    assert main(["curves", il_run, out, "--labels", "il", "hbmp", "--out", str(tmp_path / "fig.png")]) == 0
+    assert os.path.getsize(tmp_path / "fig.png") > 1000
+
+
+def test_hbmp_s_from_random_init_uses_the_sparse_reward(tmp_path):
+    out = str(tmp_path / "hbmp-s")
+    assert main(["train", "hbmp-s", "--episodes", "1", "--workers", "1", "--out", out, "--init", "none",
+                 *COMMON]) == 0
+    ckpt = torch.load(os.path.join(out, "policy.pt"), weights_only=True)
+    assert ckpt["kind"] == "hbmp-s" and ckpt["train"]["reward"] == "sparse" and ckpt["train"]["init"] is None
+    eps = read_csv(os.path.join(out, "episodes.csv"))
+    assert eps["train_return"][0] == pytest.approx(0.01 * eps["r_T"][0], abs=1e-3), "scaled r_T only"
+
+
+def test_clear_errors(il_run, tmp_path, capsys):
+    assert main(["train", "hbmp", "--resume", os.path.join(il_run, "checkpoint.pt"), "--out", str(tmp_path),
+                 *COMMON]) == 2
+    assert "'il' policy" in capsys.readouterr().err
+    assert main(["train", "hbmp", "--init", str(tmp_path / "missing.pt"), "--out", str(tmp_path), *COMMON]) == 2
+    assert "no checkpoint file" in capsys.readouterr().err
+    assert main(["train", "il", "--scenario", "hbmp_bench/Town9-Straight-v0", "--out", str(tmp_path)]) == 2
+    assert "Town01-Straight-v0" in capsys.readouterr().err
+    if importlib.util.find_spec("hbmp_bench.envs.control_env") is None:
+        assert main(["train", "flat", "--out", str(tmp_path)]) == 2
+        assert "ControlEnv" in capsys.readouterr().err
