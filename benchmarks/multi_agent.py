@@ -1,6 +1,6 @@
 """The multi-agent traffic env driven by the expert: per-agent outcomes and agent-decisions per second.
 
-    python benchmarks/multi_agent.py [--steps 300] [--counts 1 8 32] [--town Town03]
+    python benchmarks/multi_agent.py [--steps 300] [--counts 1 8 32] [--town Town03] [--gif docs/img/traffic.gif]
 
 1. Report: the expert drives the ego and every controlled background agent (``controlled="all"``,
    Town01 NavigationDynamic, one episode); a pandas table of each agent's success (ego: reached the
@@ -28,8 +28,9 @@ from hbmp_bench.envs import traffic_v0
 RESULTS = Path(__file__).parent / "results" / "multi_agent.json"
 
 
-def run(env, seed: int, max_steps: int) -> tuple[pd.DataFrame, int, float]:
-    """Drive every agent with its own expert; returns (per-agent table, decisions, seconds)."""
+def run(env, seed: int, max_steps: int, frames: list | None = None) -> tuple[pd.DataFrame, int, float]:
+    """Drive every agent with its own expert; returns (per-agent table, decisions, seconds).
+    ``frames``: a list to append the rendered view of every step to (env made with ``rgb_array``)."""
     obs, infos = env.reset(seed=seed)
     experts = {a: load_agent("expert") for a in env.possible_agents}
     for a in env.agents:
@@ -44,6 +45,8 @@ def run(env, seed: int, max_steps: int) -> tuple[pd.DataFrame, int, float]:
         decisions += len(actions)
         obs, rewards, term, trunc, infos = env.step(actions)
         last_info.update(infos)
+        if frames is not None and env.agents:
+            frames.append(env.render())
         for a in term:
             if term[a] or trunc[a]:
                 rows[a]["end"] = "terminated" if term[a] else "truncated"
@@ -68,7 +71,20 @@ def main() -> None:
     parser.add_argument("--report-steps", type=int, default=3000, help="env steps cap of the report episode")
     parser.add_argument("--counts", type=int, nargs="+", default=[1, 8, 32])
     parser.add_argument("--town", default="Town03")
+    parser.add_argument("--gif", default=None, help="also write the first --gif-steps steps of the report episode")
+    parser.add_argument("--gif-steps", type=int, default=300)
     args = parser.parse_args()
+
+    if args.gif:
+        from hbmp_bench.render import write_gif
+
+        env = traffic_v0.parallel_env(town="Town01", task="NavigationDynamic", episode_index=0, controlled="all",
+                                      render_mode="rgb_array")
+        frames: list = []
+        run(env, seed=0, max_steps=args.gif_steps, frames=frames)
+        env.close()
+        write_gif(frames[::2], args.gif, fps=5)
+        print(f"wrote {args.gif} ({len(frames[::2])} frames)")
 
     env = traffic_v0.parallel_env(town="Town01", task="NavigationDynamic", episode_index=0, controlled="all")
     table, decisions, seconds = run(env, seed=0, max_steps=args.report_steps)

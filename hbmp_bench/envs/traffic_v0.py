@@ -96,17 +96,18 @@ class TrafficParallelEnv(ParallelEnv):
         reward: ``dense`` (r_k + r_T) or ``sparse`` (r_T).
         density: override background traffic (``empty``, ``corl``, ``regular``, ``dense``).
         observation: ``deformed`` or ``vehicle_centric`` M_t.
-        render_mode: only None.
+        render_mode: None or ``rgb_array`` (:meth:`render`: the ego-centred top-down view, with
+            every vehicle and pedestrian, after the last step).
     """
 
-    metadata = {"name": "hbmp_traffic_v0", "render_modes": [], "is_parallelizable": True}
+    metadata = {"name": "hbmp_traffic_v0", "render_modes": ["rgb_array"], "render_fps": 10, "is_parallelizable": True}
 
     def __init__(self, town: str = "Town01", task: str = "NavigationDynamic", suite: str = "corl2017",
                  episode_index: int | None = None, controlled: str | int = "all",
                  ego_fidelity: str = "continuous", background_fidelity: str = "event", reward: str = "dense",
                  density: str | None = None, observation: str = "deformed", render_mode: str | None = None):
-        if render_mode is not None:
-            raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None")
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None, 'rgb_array'")
         self.town, self.task, self.suite = check_town(town), check_task(task), get_suite(suite)
         episodes = suite_episodes(self.suite.name, self.town, self.task)
         if density is not None:
@@ -129,7 +130,8 @@ class TrafficParallelEnv(ParallelEnv):
             road=spaces.Box(0.0, 2.0, (len(ROAD_FEATURES),), dtype=np.float32),
         )
         self._action_space = spaces.Discrete(len(BEHAVIORS))
-        self.render_mode = None
+        self.render_mode = render_mode
+        self._renderer = None
         self._world: TrafficWorld | None = None
         self._rng = np.random.default_rng()
 
@@ -177,6 +179,20 @@ class TrafficParallelEnv(ParallelEnv):
         result = world.step(clean)
         self.agents = list(world.live)
         return result
+
+    def render(self) -> np.ndarray | None:
+        """``rgb_array``: (H, W, 3) uint8 top-down view centred on the ego (None without a render mode)."""
+        if self.render_mode is None:
+            return None
+        if self._world is None:
+            raise RuntimeError("call reset() before render()")
+        if self._renderer is None:
+            from hbmp_bench.render import TopDownRenderer
+
+            self._renderer = TopDownRenderer(self.world.ego.net)
+        ego = self.world.ego
+        caption = f"{self.town} {len(self.agents)} agents  t={ego.sim.time:5.1f} s"
+        return self._renderer.frame(ego.scene_view(caption))
 
     def close(self) -> None:
         if self._world is not None:

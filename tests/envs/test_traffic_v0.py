@@ -186,3 +186,16 @@ def test_same_seed_same_multi_agent_episode():
     first, second = rollout(), rollout()
     env.close()
     np.testing.assert_array_equal(first, second)
+
+
+def test_render_shows_the_scene_after_a_step():
+    env = traffic_v0.parallel_env(town="Town01", task="NavigationDynamic", episode_index=0, controlled=2,
+                                  ego_fidelity="event", render_mode="rgb_array")
+    obs, infos = env.reset(seed=0)
+    env.step({a: 4 for a in env.agents if infos[a]["decision_required"]})
+    image = env.render()
+    env.close()
+    assert image.shape == (400, 400, 3) and image.dtype == np.uint8
+    assert len(np.unique(image.reshape(-1, 3), axis=0)) > 10  # a drawn scene, not a blank canvas
+    with pytest.raises(ValueError, match="render_mode"):
+        traffic_v0.parallel_env(render_mode="human")
