@@ -3,7 +3,7 @@
 A driver executes one behavior at a time for one vehicle; the world steps SUMO around it::
 
     executed = driver.begin(behavior, state, lane, next_edges)   # behavior actually run (infeasible -> keep)
-    while driver.before_step(others):                       # False once the behavior has finished
+    while driver.before_step(others):                       # others: sim.Actors; False once finished
         sim.step()
         state = driver.observe(sim_state)                   # pose the detectors and M_t use
     r_k = driver.behavior_reward()                          # the paper's lambda(c~_total); 0 in event fidelity
@@ -30,7 +30,7 @@ from hbmp_bench.planning import (BehaviorConfig, BehaviorExecutor, ExecutorConfi
                                  PlanResult, ReferencePaths, VehicleParams, reference_speed)
 from hbmp_bench.planning import VehicleState as ModelState
 from hbmp_bench.planning import step as bicycle_step
-from hbmp_bench.sim.sumo import SumoSim, VehicleState, VehicleType
+from hbmp_bench.sim.sumo import Actors, SumoSim, VehicleState, VehicleType
 
 SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = range(5)
 FIDELITIES = ("event", "continuous")
@@ -104,7 +104,7 @@ class EventDriver:
         self._left = self.steps
         return executed
 
-    def before_step(self, others: Obstacles) -> bool:
+    def before_step(self, others: Actors) -> bool:
         if self._left <= 0:
             return False
         self._left -= 1
@@ -164,12 +164,13 @@ class ContinuousDriver:
         limit = self.net.lane(lane).speed
         return int(self.executor.start(behavior, self.model, refs, limit))
 
-    def before_step(self, others: Obstacles) -> bool:
-        """Plan and track one control period; push the new pose into SUMO. False when finished."""
+    def before_step(self, others: Actors) -> bool:
+        """Plan and track one control period among ``others`` (every other actor now, predicted at
+        constant velocity); push the new pose into SUMO. False when the behavior has finished."""
         model = self.model
-        if len(others):
-            near = np.hypot(others.x - model.x, others.y - model.y) < self.config.obstacle_radius_m
-            others = others.subset(near)
+        near = np.hypot(others.xy[:, 0] - model.x, others.xy[:, 1] - model.y) < self.config.obstacle_radius_m
+        others = obstacles_from(others.xy[near], others.yaw[near], others.speed[near], others.length[near],
+                                others.width[near])
         control, plan = self.executor.step(model, others)
         self.last_plan = plan
         if self.executor.done:

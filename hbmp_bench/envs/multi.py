@@ -29,7 +29,7 @@ import dataclasses
 
 import numpy as np
 
-from hbmp_bench.envs.drivers import ContinuousDriver, EventDriver, feasible_behaviors, obstacles_from
+from hbmp_bench.envs.drivers import ContinuousDriver, EventDriver, feasible_behaviors
 from hbmp_bench.envs.world import BEHAVIORS, EGO_ID, DrivingWorld, WorldConfig, accumulate, terminal_reward
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents
 from hbmp_bench.scenarios import Episode
@@ -116,8 +116,7 @@ class BackgroundAgent:
         self.decisions += 1
 
     def wants_step(self) -> bool:
-        a = self.actors
-        return self.driver.before_step(obstacles_from(a.xy, a.yaw, a.speed, a.length, a.width))
+        return self.driver.before_step(self.actors)
 
     def after_sim_step(self, snapshot: Actors) -> StepEvents:
         sim, net = self.world.sim, self.world.net

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hbmp_bench import __version__
-from hbmp_bench.envs.drivers import FIDELITIES, ContinuousConfig, ContinuousDriver, EventDriver, feasible_behaviors, obstacles_from
+from hbmp_bench.envs.drivers import FIDELITIES, ContinuousConfig, ContinuousDriver, EventDriver, feasible_behaviors
 from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, road_profile
 from hbmp_bench.maps import net_path
 from hbmp_bench.maps.roadnet import RoadNetwork
@@ -280,7 +280,7 @@ class DrivingWorld:
 
     def wants_step(self) -> bool:
         """Let the driver plan one control period; False once the behavior has finished."""
-        return self.driver.before_step(self._planner_obstacles())
+        return self.driver.before_step(self._actors)
 
     def outcome(self, events: StepEvents, behavior_ended: bool) -> tuple[dict, float, bool, bool, dict]:
         """(observation, reward, terminated, truncated, info) after ``events`` happened.
@@ -301,10 +301,6 @@ class DrivingWorld:
         if terminated or truncated:
             info["episode"] = self.record().to_dict()
         return obs, reward, terminated, truncated, info
-
-    def _planner_obstacles(self):
-        a = self._actors
-        return obstacles_from(a.xy, a.yaw, a.speed, a.length, a.width)
 
     def after_sim_step(self, snapshot: Actors) -> StepEvents:
         """Detection after one simulation step (``snapshot``: every actor now); sets
