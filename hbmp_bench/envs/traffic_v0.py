@@ -50,7 +50,9 @@ outside 0..4 raises ValueError.
 ## Implementation
 One implementation with the gymnasium ``BehaviorEnv``: both run on ``DrivingWorld``; this env adds
 the background agents through :class:`hbmp_bench.envs.multi.TrafficWorld`. With
-``controlled="none"`` it reproduces the single-ego env step for step.
+``controlled="none"`` it reproduces the single-ego env step for step. :func:`ego_env` turns it back
+into a single-ego gymnasium env whose background agents are driven by a given policy (e.g. the
+expert through the behavior layer) instead of SUMO's models.
 
 ## Version history
 v0: first release.
@@ -61,6 +63,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
@@ -211,3 +214,70 @@ def env(**kwargs):
 
 
 raw_env = TrafficParallelEnv
+
+
+class EgoEnv(gym.Env):
+    """Single-ego gymnasium view of :class:`TrafficParallelEnv` with policy-driven background agents.
+
+    ``step(action)`` acts for the ego; every background agent that needs a decision gets one from
+    its own instance of ``background_policy`` (an agent name or ``module:Class``, see
+    :func:`hbmp_bench.agents.load_agent`), and the parallel env is stepped until the ego needs its
+    next decision or its episode ends. Rewards, ends and infos are the ego's. Made by :func:`ego_env`.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(self, background_policy: str = "expert", **kwargs):
+        from hbmp_bench.agents import load_agent
+
+        load_agent(background_policy)  # fail fast on a bad name
+        self.background_policy = background_policy
+        self.parallel = TrafficParallelEnv(**kwargs)
+        self.render_mode = self.parallel.render_mode
+        self.observation_space = self.parallel.observation_space("ego")
+        self.action_space = self.parallel.action_space("ego")
+        self._policies: dict[str, Any] = {}
+        self._obs: dict[str, Any] = {}
+        self._infos: dict[str, Any] = {}
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        from hbmp_bench.agents import load_agent
+
+        super().reset(seed=seed)
+        self._obs, self._infos = self.parallel.reset(seed=seed, options=options)
+        self._policies = {a: load_agent(self.background_policy) for a in self.parallel.possible_agents if a != "ego"}
+        for a, policy in self._policies.items():
+            if a in self._infos:
+                policy.reset(self._infos[a])
+        return self._obs["ego"], self._infos["ego"]
+
+    def _background_actions(self) -> dict[str, int]:
+        return {a: int(self._policies[a].act(self._obs[a], self._infos[a])) for a in self.parallel.agents
+                if a != "ego" and self._infos[a]["decision_required"]}
+
+    def step(self, action):
+        if "ego" not in self.parallel.agents:
+            raise RuntimeError("call reset() before step() (and again after the episode ends)")
+        actions = {**self._background_actions(), "ego": action}
+        total = 0.0
+        while True:
+            obs, rewards, terms, truncs, infos = self.parallel.step(actions)
+            self._obs.update(obs)
+            self._infos.update(infos)
+            total += float(rewards.get("ego", 0.0))
+            if terms.get("ego") or truncs.get("ego") or infos["ego"]["decision_required"]:
+                return obs["ego"], total, bool(terms.get("ego")), bool(truncs.get("ego")), infos["ego"]
+            actions = self._background_actions()
+
+    def render(self):
+        return self.parallel.render()
+
+    def close(self):
+        self.parallel.close()
+
+
+def ego_env(background_policy: str = "expert", **kwargs) -> EgoEnv:
+    """A single-ego gymnasium env whose controlled background vehicles are driven by
+    ``background_policy`` (default: the expert, ``controlled="all"``); keyword arguments as
+    :class:`TrafficParallelEnv`."""
+    return EgoEnv(background_policy, **kwargs)

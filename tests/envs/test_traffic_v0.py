@@ -7,6 +7,7 @@ import pytest
 from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
 
 from hbmp_bench.envs import BehaviorEnv, traffic_v0
+from hbmp_bench.errors import UnknownNameError
 
 SMALL = dict(town="Town01", task="NavigationDynamic", episode_index=0, controlled=3)
 SPEED_UP, SPEED_DOWN, KEEP = 0, 1, 4
@@ -199,3 +200,24 @@ def test_render_shows_the_scene_after_a_step():
     assert len(np.unique(image.reshape(-1, 3), axis=0)) > 10  # a drawn scene, not a blank canvas
     with pytest.raises(ValueError, match="render_mode"):
         traffic_v0.parallel_env(render_mode="human")
+
+
+def test_ego_env_drives_background_agents_with_a_policy():
+    """The single-ego view: the ego's actions go in, background agents get the expert's."""
+    env = traffic_v0.ego_env("expert", town="Town01", task="NavigationDynamic", episode_index=0, controlled=3,
+                             ego_fidelity="event")
+    obs, info = env.reset(seed=0)
+    assert env.observation_space.contains(obs)
+    start = env.parallel.world.ego.sim.time
+    for _ in range(20):
+        obs, reward, terminated, truncated, info = env.step(0)
+        assert env.observation_space.contains(obs)
+        if terminated or truncated:
+            break
+    elapsed = env.parallel.world.ego.sim.time - start
+    speeds = [env._infos[a]["scene"]["speed_mps"] for a in ("bg0", "bg1", "bg2")]
+    env.close()
+    assert elapsed >= 1.9  # 20 ego decisions of 0.1 s
+    assert max(speeds) > 1.0  # the expert drove the background agents off from standstill
+    with pytest.raises(UnknownNameError):
+        traffic_v0.ego_env("no-such-agent")
