@@ -75,6 +75,8 @@ class LearnedAgent:
         self.trained_env = dict(model["env"])
         self.env_kwargs = {k: v for k, v in self.trained_env.items() if k in OBSERVATION_OPTIONS}
         self.discrete = model["action_space"] == "discrete"
+        self.env_factory = None if self.discrete else "hbmp_bench.envs.control_env:ControlEnv"
+        """The env a control policy (flat) needs; None: the behavior env."""
         mask_group = model["actor"].get("action_mask_group")
         self._groups = list(model["obs_groups"]["actor"]) + ([mask_group] if mask_group else [])
         self._torch = torch

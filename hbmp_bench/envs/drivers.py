@@ -89,6 +89,8 @@ class EventDriver:
         self.steps, self.behavior_config = steps, behavior
         self._left = 0
         self.last_plan: PlanResult | None = None
+        self.off_map = False
+        """Whether the vehicle's pose could not be put into SUMO (far off its route): never here."""
 
     def reset(self, state: VehicleState) -> None:
         self._left = 0
@@ -140,6 +142,8 @@ class ContinuousDriver:
         self.dt = config.executor.dt
         self.model: ModelState | None = None
         self.last_plan: PlanResult | None = None
+        self.off_map = False
+        """The model's pose is too far from the route for SUMO to place the vehicle there."""
         self._path = functools.lru_cache(maxsize=512)(
             lambda lane, nxt: followed_path(net, lane, nxt, config.lane_back_m, config.lane_ahead_m,
                                             max_spacing=1.0, round_corners=3))
@@ -148,6 +152,7 @@ class ContinuousDriver:
         """Take the vehicle's pose from SUMO at the start of an episode (speed kept, steering centred)."""
         self.model = ModelState(float(state.xy[0]), float(state.xy[1]), float(state.yaw), max(float(state.speed), 0.0))
         self.last_plan = None
+        self.off_map = False
 
     def reference_paths(self, lane_id: str, next_edges: tuple[str, ...]) -> ReferencePaths:
         """Centrelines of the left, current and right lane, each continued along the route."""
@@ -176,7 +181,7 @@ class ContinuousDriver:
         if self.executor.done:
             return False
         self.model = bicycle_step(model, control, self.dt, self.config.vehicle)
-        self.sim.move_to_xy(self.vehicle_id, self.model.xy, self.model.yaw)
+        self.off_map = not self.sim.move_to_xy(self.vehicle_id, self.model.xy, self.model.yaw)
         return True
 
     def observe(self, state: VehicleState) -> VehicleState:

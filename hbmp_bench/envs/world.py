@@ -306,8 +306,8 @@ class DrivingWorld:
         """Detection after one simulation step (``snapshot``: every actor now); sets
         ``done_reason`` when the episode ends."""
         state = self.sim.vehicle_state(EGO_ID)
-        if state is None or EGO_ID in self.sim.arrived_ids():
-            self.done_reason = "left_network"
+        if state is None or EGO_ID in self.sim.arrived_ids() or self.driver.off_map:
+            self.done_reason = "left_network"  # also: driven so far off the road SUMO cannot place it
             return StepEvents()
         state = self.driver.observe(state)
         self._ego = state

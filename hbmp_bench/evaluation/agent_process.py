@@ -18,6 +18,8 @@ import operator
 import traceback
 from multiprocessing.connection import Connection
 
+import numpy as np
+
 TRACEBACK_LIMIT = 6
 """Innermost frames of an agent traceback kept in the error text."""
 
@@ -26,15 +28,23 @@ def _error_text(stage: str) -> str:
     return f"agent {stage} raised:\n" + traceback.format_exc(limit=-TRACEBACK_LIMIT).rstrip()
 
 
-def as_action(value: object) -> int:
-    """An agent's action as a plain int; raises TypeError for anything that is not an integer
-    (bools, floats, strings, arrays of more than one element)."""
+def as_action(value: object) -> int | tuple[float, ...]:
+    """An agent's action as a plain int (behavior agents) or a tuple of floats (control agents,
+    e.g. the flat baseline's ``[accel, steer]``); raises TypeError for anything else (bools,
+    strings, nested or empty arrays). The env process checks it against its action space."""
     if isinstance(value, bool):
         raise TypeError(f"action must be an integer, got bool {value!r}")
     try:
         return int(operator.index(value))
     except TypeError:
-        raise TypeError(f"action must be an integer, got {type(value).__name__} {value!r:.80}") from None
+        pass
+    try:
+        array = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        array = None
+    if array is not None and array.ndim == 1 and array.size > 0 and not isinstance(value, (str, bytes)):
+        return tuple(float(x) for x in array)
+    raise TypeError(f"action must be an integer or a 1-D vector of numbers, got {type(value).__name__} {value!r:.80}")
 
 
 def agent_main(conn: Connection, spec: str, lifeline: Connection, environ: dict[str, str] | None = None) -> None:

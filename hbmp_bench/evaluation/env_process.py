@@ -20,6 +20,8 @@ import traceback
 from multiprocessing.connection import Connection
 from typing import Any
 
+import numpy as np
+
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, adopt_environment, watch_lifeline
 from hbmp_bench.metrics.records import AGENT_ERROR, DECISION_CAP, SIM_ERROR, EpisodeRecord
 
@@ -31,8 +33,8 @@ class AgentFailure(Exception):
     """The agent process raised, timed out, died or answered nonsense; the message says which."""
 
 
-def build_env(task: EpisodeTask, factory: str | None):
-    """The env of a task: ``BehaviorEnv`` or ``factory(town=, task=, suite=, fidelity=)``."""
+def build_env(task: EpisodeTask, factory: str | None, env_kwargs: dict | None = None):
+    """The env of a task: ``BehaviorEnv`` or ``factory(town=, task=, suite=, fidelity=, **env_kwargs)``."""
     if factory is None:
         from hbmp_bench.envs.behavior_env import BehaviorEnv
 
@@ -40,7 +42,17 @@ def build_env(task: EpisodeTask, factory: str | None):
     else:
         module_name, _, attr = factory.partition(":")
         make = getattr(importlib.import_module(module_name), attr)
-    return make(town=task.town, task=task.task, suite=task.suite, fidelity=task.fidelity)
+    return make(town=task.town, task=task.task, suite=task.suite, fidelity=task.fidelity, **(env_kwargs or {}))
+
+
+def _valid_action(space, action) -> bool:
+    """``action`` (int or tuple of floats from the agent process) belongs to ``space``."""
+    if isinstance(action, int):
+        return hasattr(space, "n") and 0 <= action < int(space.n)
+    if isinstance(action, tuple) and hasattr(space, "shape") and not hasattr(space, "n"):
+        array = np.asarray(action, dtype=space.dtype)
+        return array.shape == space.shape and bool(space.contains(array))
+    return False
 
 
 def blank_record(task: EpisodeTask, end_reason: str, error: str) -> EpisodeRecord:
@@ -115,8 +127,9 @@ class _AgentLink:
 class _EnvSlot:
     """One env kept across episodes of the same (suite, town, task, fidelity)."""
 
-    def __init__(self, factory: str | None):
+    def __init__(self, factory: str | None, env_kwargs: dict | None = None):
         self.factory = factory
+        self.env_kwargs = env_kwargs or {}
         self.env = None
         self.key: tuple | None = None
 
@@ -124,7 +137,7 @@ class _EnvSlot:
         key = (task.suite, task.town, task.task, task.fidelity)
         if key != self.key:
             self.close()
-            self.env = build_env(task, self.factory)
+            self.env = build_env(task, self.factory, self.env_kwargs)
             self.key = key
         return self.env
 
@@ -156,7 +169,6 @@ def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits
     except Exception:  # noqa: BLE001
         return outcome(blank_record(task, SIM_ERROR, "env reset raised:\n" + traceback.format_exc(limit=-8)), SIM_ERROR, True)
     beat(force=True)
-    n_actions = int(getattr(env.action_space, "n", 5))
     try:
         agent.ask(("reset", info), "reset()")
     except AgentFailure as exc:
@@ -171,9 +183,11 @@ def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits
         except AgentFailure as exc:
             return outcome(partial_record(env, task, AGENT_ERROR, str(exc)), AGENT_ERROR, True)
         times.append(time.perf_counter() - start)
-        if not isinstance(action, int) or not 0 <= action < n_actions:
-            error = f"invalid action {action!r} at decision {decisions}: want an int in [0, {n_actions})"
+        if not _valid_action(env.action_space, action):
+            error = f"invalid action {action!r} at decision {decisions}: want an element of {env.action_space}"
             return outcome(partial_record(env, task, AGENT_ERROR, error), AGENT_ERROR, False)
+        if isinstance(action, tuple):
+            action = np.asarray(action, dtype=env.action_space.dtype)
         try:
             obs, _, terminated, truncated, info = env.step(action)
         except Exception:  # noqa: BLE001
@@ -194,7 +208,7 @@ def env_main(pool_conn: Connection, agent_conn: Connection, limits: RunnerLimits
     adopt_environment(environ)
     import hbmp_bench.envs.behavior_env  # noqa: F401  (imported before the first heartbeat)
 
-    env_slot = _EnvSlot(limits.env_factory)
+    env_slot = _EnvSlot(limits.env_factory, dict(limits.env_kwargs))
     last_beat = [time.monotonic()]
 
     def beat(force: bool = False) -> None:

@@ -10,6 +10,8 @@ of a key wins when reading).
 
 from __future__ import annotations
 
+import dataclasses
+
 import os
 import time
 from collections.abc import Iterable, Iterator, Sequence
@@ -132,7 +134,7 @@ def evaluate(
     if check_agent:
         from hbmp_bench.agents import load_agent
 
-        load_agent(agent)
+        limits = with_agent_env(limits, load_agent(agent))
     path = Path(path) if path is not None else records_path(out_dir, selection[0].suite, agent)
     path.parent.mkdir(parents=True, exist_ok=True)
     repair_records(path)
@@ -148,6 +150,15 @@ def evaluate(
     records = sorted((r for r in _read(path) if r.key in wanted), key=lambda r: wanted[r.key])
     return EvaluationResult(path, tuple(records), ran, len(selection) - len(todo), time.perf_counter() - start,
                             len(selection) - len(records))
+
+
+def with_agent_env(limits: RunnerLimits, agent) -> RunnerLimits:
+    """``limits`` with the env the agent asks for: an agent may name an ``env_factory``
+    (``module:callable``, e.g. the flat baseline's control env) and ``env_kwargs`` (e.g. the
+    observation kind its policy was trained with). Explicit limits win."""
+    factory = limits.env_factory or getattr(agent, "env_factory", None)
+    kwargs = {**dict(getattr(agent, "env_kwargs", {}) or {}), **dict(limits.env_kwargs)}
+    return dataclasses.replace(limits, env_factory=factory, env_kwargs=tuple(kwargs.items()))
 
 
 def _read(path: Path) -> list[EpisodeRecord]:

@@ -7,6 +7,7 @@ import os
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 from hbmp_bench.scenarios import TASKS, check_task, check_town, get_suite
 
@@ -55,7 +56,10 @@ class RunnerLimits:
         max_decisions: stop every episode after this many decisions (``decision_cap``; smoke
             runs); None runs episodes to their end.
         env_factory: ``module:callable`` building the env from ``(town=, task=, suite=,
-            fidelity=)``; None is ``BehaviorEnv``. For wrappers and fault-injection tests.
+            fidelity=, **env_kwargs)``; None is ``BehaviorEnv``. For agents that need another env
+            (the flat baseline's control env), wrappers and fault-injection tests.
+        env_kwargs: extra env options as ``(name, value)`` pairs (e.g. the observation kind a
+            policy was trained with).
     """
 
     decision_timeout_s: float = 10.0
@@ -65,6 +69,7 @@ class RunnerLimits:
     retries: int = 1
     max_decisions: int | None = None
     env_factory: str | None = None
+    env_kwargs: tuple[tuple[str, Any], ...] = ()
 
     def __post_init__(self):
         for name in ("decision_timeout_s", "agent_start_timeout_s", "start_timeout_s", "watchdog_s"):
@@ -74,6 +79,7 @@ class RunnerLimits:
             raise ValueError(f"retries must be >= 0, got {self.retries}")
         if self.max_decisions is not None and self.max_decisions <= 0:
             raise ValueError(f"max_decisions must be > 0 or None, got {self.max_decisions}")
+        object.__setattr__(self, "env_kwargs", tuple(sorted(dict(self.env_kwargs).items())))
         if self.env_factory is not None and ":" not in self.env_factory:
             raise ValueError(f"env_factory must be 'module:callable', got {self.env_factory!r}")
 

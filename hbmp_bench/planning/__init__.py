@@ -20,7 +20,7 @@ from .control import control_law, linear_speed_profile, omega_limit
 from .executor import (BehaviorExecutor, BehaviorOutcome, ExecutorConfig, ReferencePaths,
                        reward_from_cost, target_path)
 from .frame import Path, round_corners, wrap_angle
-from .planner import COST_NAMES, PlannerConfig, PlanningProblem, PlanResult, plan
+from .planner import COST_NAMES, PlannerConfig, PlanningProblem, PlanResult, instant_costs, plan
 from .sim import Rollout, simulate_behavior
 from .state import Obstacles, VehicleState
 from .tracking import PID, TrackerConfig, TrajectoryTracker
@@ -32,7 +32,7 @@ __all__ = [
     "BehaviorExecutor", "BehaviorOutcome", "ExecutorConfig", "ReferencePaths",
     "reward_from_cost", "target_path",
     "Path", "round_corners", "wrap_angle",
-    "COST_NAMES", "PlannerConfig", "PlanningProblem", "PlanResult", "plan",
+    "COST_NAMES", "PlannerConfig", "PlanningProblem", "PlanResult", "instant_costs", "plan",
     "Rollout", "simulate_behavior",
     "Obstacles", "VehicleState",
     "PID", "TrackerConfig", "TrajectoryTracker",

@@ -384,6 +384,25 @@ def _obstacle_cost(SS, EE, obs: Obstacles, lp: Path, times, cfg: PlannerConfig) 
     return g.sum(axis=0, dtype=np.float64) / T
 
 
+def instant_costs(path: Path, ego: VehicleState, obstacles: Obstacles,
+                  cfg: PlannerConfig | None = None) -> tuple[float, float]:
+    """``(c_dist, c_obs)`` of the ego's state now, with the planner's formulas at one instant.
+
+    ``c_dist = 1 / (1 + |v|)`` and ``c_obs = sum_o exp(-(g_lon + kappa_obs g_lat) / sigma_obs)``
+    with the gaps measured in ``path``'s curvilinear frame (see the module docstring). Used to
+    reward a controller that has no planner (the flat baseline): the paper's r_t without the
+    velocity term, which needs a behavior's v_ref.
+    """
+    cfg = PlannerConfig() if cfg is None else cfg
+    s, e, _, _ = path.project(ego.xy, ego.yaw)
+    c_dist = 1.0 / (1.0 + abs(ego.v))
+    if len(obstacles) == 0:
+        return c_dist, 0.0
+    lp = path.resample(cfg.path_resolution, s - 60.0, s + 60.0, extrapolate=True)
+    c_obs = float(_obstacle_cost(np.array([[s]]), np.array([[e]]), obstacles, lp, np.zeros(1), cfg)[0])
+    return c_dist, c_obs
+
+
 # ---------------------------------------------------------------------------- planner
 def curve_speed_cap(path: Path, s0: float, v: float, cfg: PlannerConfig) -> float:
     """Highest speed [m/s] now from which the ego can still slow to every curve ahead.

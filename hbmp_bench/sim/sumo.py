@@ -360,18 +360,23 @@ class SumoSim:
         return True
 
     def move_to_xy(self, vehicle_id: str, xy: np.ndarray, yaw: float, *, edge: str = "", lane_index: int = -1,
-                   on_route: bool = True) -> None:
+                   on_route: bool = True) -> bool:
         """Place a vehicle's footprint centre at ``xy`` [m] with heading ``yaw`` [rad] in the next step.
 
         ``on_route`` (SUMO keepRoute=1) maps the pose onto the closest lane of the vehicle's own
         route, so its route, route index and next traffic lights stay valid (what a driven ego
         needs); otherwise the vehicle may go anywhere, even off the road (keepRoute=2), and its
         route shrinks to the edge it lands on. ``edge`` / ``lane_index`` are optional hints.
+        Returns False when SUMO cannot map the pose (too far from any lane of the route).
         """
         length = self._dims[vehicle_id][0]
         front = np.asarray(xy, dtype=float) + length / 2 * np.array([math.cos(yaw), math.sin(yaw)])
-        libsumo.vehicle.moveToXY(vehicle_id, edge, int(lane_index), float(front[0]), float(front[1]),
-                                 yaw_to_sumo_angle(yaw), 1 if on_route else 2)
+        try:
+            libsumo.vehicle.moveToXY(vehicle_id, edge, int(lane_index), float(front[0]), float(front[1]),
+                                     yaw_to_sumo_angle(yaw), 1 if on_route else 2)
+        except libsumo.TraCIException:
+            return False
+        return True
 
     def light_states(self) -> dict[str, str]:
         """Signal char of every controlled lane now: incoming lane id -> ``r``/``y``/``g``/``G``...

@@ -40,7 +40,7 @@ def test_mixed_failures_in_one_pool_then_a_good_agent_still_drives():
     with EpisodePool(1, limits) as pool:
         by_agent = {o.record.agent.split(":")[-1]: o.record for o in pool.imap(tasks)}
     assert "invalid action 7 at decision 0" in by_agent["InvalidActionAgent"].error
-    assert "action must be an integer, got float 1.5" in by_agent["FloatActionAgent"].error
+    assert "action must be an integer or a 1-D vector of numbers, got float 1.5" in by_agent["FloatActionAgent"].error
     assert "agent process exited" in by_agent["DyingAgent"].error
     assert "could not be built" in by_agent["BrokenInitAgent"].error
     assert "weights file missing" in by_agent["BrokenInitAgent"].error

@@ -72,5 +72,5 @@ def test_the_three_line_test_of_an_agent_author(tmp_path):
     assert run.returncode == 1, run.stdout + run.stderr
     assert "1 failed, 1 passed" in run.stdout
     assert "agent 'author_agents:Bad' failed the hbmp_bench smoke run" in run.stdout
-    assert "action must be an integer, got dict" in run.stdout
+    assert "action must be an integer or a 1-D vector of numbers, got dict" in run.stdout
     assert "Traceback" not in run.stdout  # the failure is the message, not the plugin's stack

@@ -54,10 +54,11 @@ def test_agent_slug_and_limits_validation():
         RunnerLimits(env_factory="no_colon")
 
 
-def test_as_action_accepts_integers_only():
+def test_as_action_accepts_integers_and_control_vectors():
     import numpy as np
 
     assert as_action(3) == 3 and as_action(np.int64(2)) == 2 and as_action(np.array(4)) == 4
-    for bad in (1.5, "2", True, np.array([1, 2]), None):
+    assert as_action(np.array([0.5, -0.25])) == (0.5, -0.25) and as_action([1, 2]) == (1.0, 2.0)
+    for bad in (1.5, "2", True, np.array([[1.0, 2.0]]), np.array([]), None, {"a": 1}):
         with pytest.raises(TypeError, match="integer"):
             as_action(bad)

@@ -1,7 +1,6 @@
 """``hbmp-bench train`` end to end on short Town02 routes in event fidelity: il, then hbmp from it,
 hbmp-s from scratch; outputs, weights_only checkpoints that act, resume, and clear errors."""
 
-import importlib.util
 import os
 
 import pytest
@@ -107,6 +106,23 @@ def test_clear_errors(il_run, tmp_path, capsys):
     assert "no checkpoint file" in capsys.readouterr().err
     assert main(["train", "il", "--scenario", "hbmp_bench/Town9-Straight-v0", "--out", str(tmp_path)]) == 2
     assert "Town01-Straight-v0" in capsys.readouterr().err
-    if importlib.util.find_spec("hbmp_bench.envs.control_env") is None:
-        assert main(["train", "flat", "--out", str(tmp_path)]) == 2
-        assert "ControlEnv" in capsys.readouterr().err
+    assert main(["train", "flat", "--fidelity", "event", "--out", str(tmp_path / "flat"), "--episodes", "1"]) == 2
+    assert "continuous" in capsys.readouterr().err
+
+
+def test_flat_trains_on_the_control_env_and_is_evaluated_there(tmp_path):
+    """The flat baseline: PPO on [accel, steer]; the evaluation builds the env its policy asks for."""
+    from hbmp_bench.evaluation import evaluate
+
+    out = str(tmp_path / "flat")
+    assert main(["train", "flat", "--episodes", "1", "--workers", "1", "--out", out, "--scenario", SCENARIO,
+                 "--seed", "0", "--no-progress"]) == 0
+    _files_of_a_run(out, 1)
+    policy = os.path.join(out, "policy.pt")
+    agent = load_agent(policy)
+    assert not agent.discrete and agent.env_factory.endswith("control_env:ControlEnv")
+    result = evaluate("corl2017", policy, towns=["Town02"], tasks=["Straight"], episodes=1, workers=1,
+                      out_dir=tmp_path / "eval", progress=False)
+    (record,) = result.records
+    assert record.end_reason not in ("agent_error", "sim_error"), record.error
+    assert record.decisions > 0
