@@ -8,7 +8,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from hbmp_bench.envs.observation import ROAD_FEATURES, ObservationConfig
+from hbmp_bench.envs.observation import ObservationConfig, observation_space
 from hbmp_bench.envs.world import BEHAVIORS, DrivingWorld, WorldConfig
 from hbmp_bench.scenarios import TASKS, check_task, check_town, get_suite, sample_episode, suite_episodes, traffic_for
 
@@ -94,10 +94,7 @@ class BehaviorEnv(gym.Env):
             raise ValueError(f"episode_index must be in [0, {len(self.episodes)}), got {episode_index}")
         self.episode_index = episode_index
         self.action_space = spaces.Discrete(len(BEHAVIORS))
-        self.observation_space = spaces.Dict(
-            occupancy=spaces.Box(0.0, 1.0, (1, obs_cfg.rows, obs_cfg.cols), dtype=np.float32),
-            road=spaces.Box(0.0, 2.0, (len(ROAD_FEATURES),), dtype=np.float32),
-        )
+        self.observation_space = observation_space(obs_cfg)
         self.render_mode = render_mode
         self._renderer = None
         self._frames: list[np.ndarray] = []

@@ -69,6 +69,16 @@ class ObservationConfig:
         return self.cols * self.cell_lat_m / 2
 
 
+def observation_space(config: ObservationConfig):
+    """The gymnasium space of the observation ``{"occupancy": M_t, "road": R_t}`` for ``config``."""
+    from gymnasium import spaces
+
+    return spaces.Dict(
+        occupancy=spaces.Box(0.0, 1.0, (1, config.rows, config.cols), dtype=np.float32),
+        road=spaces.Box(0.0, 2.0, (len(ROAD_FEATURES),), dtype=np.float32),
+    )
+
+
 def _sample_boxes(xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np.ndarray, n_long: int = 10, n_lat: int = 4) -> np.ndarray:
     """Points (K·n_long·n_lat, 2) spread over K oriented boxes (corners included)."""
     u = np.linspace(-0.5, 0.5, n_long)

@@ -70,7 +70,7 @@ from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
 from hbmp_bench.envs.multi import TrafficWorld
-from hbmp_bench.envs.observation import ROAD_FEATURES, ObservationConfig
+from hbmp_bench.envs.observation import ObservationConfig, observation_space
 from hbmp_bench.envs.world import BEHAVIORS, WorldConfig
 from hbmp_bench.scenarios import check_task, check_town, get_suite, suite_episodes, traffic_for
 
@@ -128,10 +128,7 @@ class TrafficParallelEnv(ParallelEnv):
         self.background_fidelity = background_fidelity
         self.possible_agents = ["ego", *(f"bg{k}" for k in range(self.n_controlled))]
         self.agents: list[str] = []
-        self._observation_space = spaces.Dict(
-            occupancy=spaces.Box(0.0, 1.0, (1, obs_cfg.rows, obs_cfg.cols), dtype=np.float32),
-            road=spaces.Box(0.0, 2.0, (len(ROAD_FEATURES),), dtype=np.float32),
-        )
+        self._observation_space = observation_space(obs_cfg)
         self._action_space = spaces.Discrete(len(BEHAVIORS))
         self.render_mode = render_mode
         self._renderer = None

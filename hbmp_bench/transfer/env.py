@@ -11,7 +11,7 @@ import numpy as np
 from gymnasium import spaces
 
 from hbmp_bench import __version__
-from hbmp_bench.envs.observation import ROAD_FEATURES, ObservationConfig
+from hbmp_bench.envs.observation import ObservationConfig, observation_space
 from hbmp_bench.envs.world import BEHAVIORS, CHANGE_LEFT, CHANGE_RIGHT, KEEP, TERMINAL_REWARD
 from hbmp_bench.metrics.detectors import EVENT_KINDS
 from hbmp_bench.metrics.records import EpisodeRecord, driving_score
@@ -127,10 +127,7 @@ class HighwayTransferEnv(gym.Env):
                                      speed_step_mps=speed_step_mps, lane_change_max_s=lane_change_max_s)
         self.render_mode = render_mode
         self.action_space = spaces.Discrete(len(BEHAVIORS))
-        self.observation_space = spaces.Dict(
-            occupancy=spaces.Box(0.0, 1.0, (1, obs_cfg.rows, obs_cfg.cols), dtype=np.float32),
-            road=spaces.Box(0.0, 2.0, (len(ROAD_FEATURES),), dtype=np.float32),
-        )
+        self.observation_space = observation_space(obs_cfg)
         self._hw = None
         self._running = False
         self._episode_index = -1
