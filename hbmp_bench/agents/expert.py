@@ -107,7 +107,7 @@ class ExpertAgent:
         if not scene["in_junction"] and road[3] < 0.5 and d_stop < 30.0 and (offset == 0 or mask[change]):
             # wait for a gap to the route's lane, early enough to change lanes from there; once
             # lane changes are closed (last metres of the lane) drive on: the route is re-planned
-            room_to_change = 16.0 if period > 0.2 else 0.0
+            room_to_change = 16.0 if period > 0.2 else 12.0  # > the lane-change cutoff (10 m)
             stop_at = min(stop_at, d_stop + self.stop_margin_m - 1.0 - room_to_change)
         target = min(target, self._stop_speed(stop_at - travel))
         if scene.get("turn_ahead", "") in ("l", "L", "r", "R"):

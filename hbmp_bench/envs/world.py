@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hbmp_bench import __version__
-from hbmp_bench.envs.drivers import FIDELITIES, ContinuousConfig, ContinuousDriver, EventDriver, feasible_behaviors
+from hbmp_bench.envs.drivers import FIDELITIES, LANE_CHANGE_CUTOFF_M, ContinuousConfig, ContinuousDriver, EventDriver, feasible_behaviors
 from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, road_profile
 from hbmp_bench.maps import net_path
 from hbmp_bench.maps.roadnet import RoadNetwork
@@ -354,13 +354,16 @@ class DrivingWorld:
     def _keep_route_reachable(self) -> None:
         """Re-plan the route when the followed lane cannot continue it.
 
-        A lane without a link onto the route's next edge (the ego is in a wrong lane at the stop
-        line) leads elsewhere; like a navigation system, the route is then re-planned from the
-        edge that lane leads to, so SUMO's route (which continuous fidelity maps the ego onto)
-        and R_t stay consistent. Costs the agent time and route completion, nothing else."""
+        A lane without a link onto the route's next edge leads elsewhere once lane changes are
+        closed (the last ``LANE_CHANGE_CUTOFF_M`` before the stop line); like a navigation system,
+        the route is then re-planned from the edge that lane leads to, so SUMO's route (which
+        continuous fidelity maps the ego onto) and R_t stay consistent. Costs the agent time and
+        route completion, nothing else."""
         lane = self._followed_lane
         if lane not in self.net.lanes or self._ego.lane != lane:
             return
+        if self.net.lane(lane).length - self._ego.lane_pos >= LANE_CHANGE_CUTOFF_M:
+            return  # lane changes are still open: the agent can reach a lane that continues the route
         edge = self.net.lane(lane).edge
         k = self._route_pos.get(edge)
         if k is None or k + 1 >= len(self.route) or lane in self.net.lanes_to(edge, self.route[k + 1]):

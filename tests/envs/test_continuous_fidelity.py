@@ -88,3 +88,25 @@ def test_render_returns_frames_between_decisions():
     assert len(first) == 1
     assert len(frames) == round(info["duration_s"] / 0.1)  # one per 0.1 s simulation step
     assert image.shape == (400, 400, 3) and image.dtype == np.uint8
+
+
+@pytest.mark.slow
+def test_route_is_replanned_only_once_lane_changes_are_closed():
+    """Town05 One turn, episode 1 starts in a lane that does not continue the route: the route
+    stays (the agent can still change lanes) until the lane's last metres, where it is re-planned
+    from where that lane leads."""
+    env = BehaviorEnv(town="Town05", task="OneTurn", episode_index=1, fidelity="event")
+    env.reset(seed=1)
+    world = env.world
+    original = world.route
+    assert world.followed_lane not in world.net.lanes_to(original[0], original[1])
+    for _ in range(20):
+        env.step(0)  # speed up, staying in the lane
+    assert world.route == original and world.reroutes == 0
+    for _ in range(600):  # drive on in the wrong lane to its end
+        _, _, terminated, truncated, _ = env.step(4)
+        if world.reroutes or terminated or truncated:
+            break
+    env.close()
+    assert world.reroutes == 1 and world.route[0] == original[0] and world.route[1] != original[1]
+    assert world.route[-1] == original[-1]  # still to the same goal edge
