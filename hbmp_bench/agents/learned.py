@@ -102,7 +102,8 @@ class LearnedAgent:
             out = self.actor(self._batch(observation, info))[0]
         if self.discrete:
             return int(out.item())
-        return out.cpu().numpy()
+        # the Gaussian mean is unbounded; training clips controls to [-1, 1] in the env, so does this
+        return np.clip(out.cpu().numpy(), -1.0, 1.0).astype(np.float32)
 
     def behavior_probabilities(self, observation: dict[str, Any], info: dict[str, Any]) -> np.ndarray:
         """(5,) the policy's behavior probabilities (behavior policies only)."""
