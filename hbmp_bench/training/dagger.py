@@ -244,7 +244,8 @@ def train_dagger(run: RunConfig, env_config: WorkerEnvConfig, dagger: DaggerConf
             save_datasets(run.path("dataset.npz"), train_set, holdout)
             save_checkpoint(run.path("checkpoint.pt"), checkpoint())
 
-        episodes_log = CsvLog(run.path("episodes.csv"), EPISODE_COLUMNS + DAGGER_COLUMNS)
+        episodes_log = CsvLog(run.path("episodes.csv"), EPISODE_COLUMNS + DAGGER_COLUMNS,
+                              keep_through=progress.episodes if resume is not None else None)
         rounds_log = CsvLog(run.path("rounds.csv"), ROUND_COLUMNS)
         logs = [episodes_log, rounds_log]
         bar = progress_bar(run, progress.episodes)

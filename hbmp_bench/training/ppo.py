@@ -233,7 +233,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig, init:
                     "critic_state_dict": alg.critic.state_dict(), "optimizer_state_dict": alg.optimizer.state_dict(),
                     "progress": progress.to_dict(), "train": {"command": run.command, "seed": run.seed, **options}}
 
-        log = CsvLog(run.path("episodes.csv"), EPISODE_COLUMNS)
+        log = CsvLog(run.path("episodes.csv"), EPISODE_COLUMNS, keep_through=progress.episodes if resume else None)
         bar = progress_bar(run, progress.episodes)
         last_save = progress.episodes
         while progress.episodes < run.episodes:

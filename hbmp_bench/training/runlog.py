@@ -22,9 +22,14 @@ ROUND_COLUMNS = ("round", "episodes", "dataset", "holdout", "loss", "train_agree
 
 
 class CsvLog:
-    """Append-only CSV with a fixed header; reopening an existing file checks the header matches."""
+    """Append-only CSV with a fixed header; reopening an existing file checks the header matches.
 
-    def __init__(self, path: str, columns: Sequence[str]):
+    ``keep_through``: on reopening for a resume, drop the rows whose ``episode`` is beyond this
+    number first (they were logged after the checkpoint the run resumes from, and will be run
+    again), so every episode appears once.
+    """
+
+    def __init__(self, path: str, columns: Sequence[str], keep_through: int | None = None):
         self.path = path
         self.columns = tuple(columns)
         exists = os.path.isfile(path) and os.path.getsize(path) > 0
@@ -33,6 +38,15 @@ class CsvLog:
                 header = next(csv.reader(f), [])
             if tuple(header) != self.columns:
                 raise ValueError(f"{path!r} has columns {header}, expected {list(self.columns)}")
+            if keep_through is not None:
+                with open(path, newline="") as f:
+                    rows = [r for r in csv.DictReader(f) if int(r["episode"]) <= keep_through]
+                tmp = path + ".tmp"
+                with open(tmp, "w", newline="") as f:
+                    writer = csv.DictWriter(f, fieldnames=self.columns)
+                    writer.writeheader()
+                    writer.writerows(rows)
+                os.replace(tmp, path)
         os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
         self._file = open(path, "a", newline="")
         self._writer = csv.DictWriter(self._file, fieldnames=self.columns, extrasaction="ignore")

@@ -135,3 +135,16 @@ def test_ppo_config_defaults_are_the_papers_and_validate():
         PPOConfig(num_steps_per_env=10).runner_cfg(1, GROUPS, *behavior_model_cfgs())
     with pytest.raises(ValueError, match="schedule"):
         TwoRatePPO(None, None, None, schedule="adaptive")
+
+
+def test_csv_log_drops_rows_logged_after_the_resumed_checkpoint(tmp_path):
+    from hbmp_bench.training.runlog import CsvLog, read_csv
+
+    path = str(tmp_path / "episodes.csv")
+    with CsvLog(path, ("episode", "r_T")) as log:
+        for k in range(1, 6):
+            log.write({"episode": k, "r_T": float(k)})
+    with CsvLog(path, ("episode", "r_T"), keep_through=3) as log:  # resumed from episode 3
+        log.write({"episode": 4, "r_T": 40.0})
+    rows = read_csv(path)
+    assert rows["episode"].tolist() == [1, 2, 3, 4] and rows["r_T"].tolist() == [1.0, 2.0, 3.0, 40.0]
