@@ -69,6 +69,7 @@ def _check_load(agents: list[str]) -> tuple[list[str], dict[str, str]]:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
+    import multiprocessing
     from concurrent.futures import ProcessPoolExecutor
 
     import pandas as pd
@@ -110,7 +111,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             for job in jobs:
                 collect(job, timed_run(*job))
         else:
-            with ProcessPoolExecutor(max_workers=args.workers) as pool:
+            # spawn: the parent may have imported torch (learned agents), which is not fork-safe
+            with ProcessPoolExecutor(max_workers=args.workers, mp_context=multiprocessing.get_context("spawn")) as pool:
                 futures = [(job, pool.submit(timed_run, *job)) for job in jobs]
                 for job, fut in futures:
                     collect(job, fut.result())
