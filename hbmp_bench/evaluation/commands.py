@@ -123,7 +123,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser("leaderboard", help="submit an agent to a suite's leaderboard, add or render results")
     lsub = p.add_subparsers(dest="leaderboard_cmd", required=True)
-    q = lsub.add_parser("submit", help="evaluate an agent and write leaderboards/<suite>/<agent>.json")
+    q = lsub.add_parser("submit", help="evaluate an agent and write leaderboards/<suite>/<agent>.<fidelity>.json")
     _add_selection(q, agent_default=None)
     q.add_argument("--board-dir", default="leaderboards", help="leaderboard folder (default: leaderboards)")
     q.add_argument("--records-dir", default=None, help="raw records (default: <board>/<suite>/runs/<hash>)")

@@ -1,4 +1,4 @@
-"""Leaderboards kept as files: ``<board>/<suite>/<agent>.json`` results and a generated README.
+"""Leaderboards kept as files: ``<board>/<suite>/<agent>.<fidelity>.json`` results and a generated README.
 
 A submission evaluates an agent on a suite (resumable, see ``evaluate``) and writes a results
 file with the per-episode records, the aggregate scores and provenance (package and library
@@ -8,7 +8,7 @@ suite's ``README.md`` is then regenerated: a ranked table per fidelity.
 Rules:
 - Only *complete* entries are ranked: every episode of the official suite (all towns, tasks and
   episodes) with no ``sim_error`` left. A run on a subset (``towns``/``tasks``/``episodes``) is
-  written as ``<agent>.subset.json`` and listed under "Partial runs (not ranked)"; it never
+  written as ``<agent>.<fidelity>.subset.json`` and listed under "Partial runs (not ranked)"; it never
   replaces a full entry.
 - A results file whose suite definition hash differs from the installed suite's is refused
   (``StaleResultsError``) when it is added and when the README is generated: its episodes are not
@@ -47,9 +47,10 @@ class StaleResultsError(ValueError):
     """A results file made for another definition of its suite."""
 
 
-def entry_path(board_dir: str | os.PathLike, suite: str, agent: str, subset: bool) -> Path:
-    """``<board>/<suite>/<agent slug>.json`` (``.subset.json`` for partial runs)."""
-    return Path(board_dir) / suite / f"{agent_slug(agent)}{'.subset' if subset else ''}.json"
+def entry_path(board_dir: str | os.PathLike, suite: str, agent: str, subset: bool, fidelity: str) -> Path:
+    """``<board>/<suite>/<agent slug>.<fidelity>.json`` (``.subset.json`` for partial runs): one
+    entry per agent and fidelity, ranked in that fidelity's table."""
+    return Path(board_dir) / suite / f"{agent_slug(agent)}.{fidelity}{'.subset' if subset else ''}.json"
 
 
 def runs_dir(board_dir: str | os.PathLike, suite: str) -> Path:
@@ -224,7 +225,7 @@ def add_results(path: str | os.PathLike, board_dir: str | os.PathLike) -> Path:
     """Check a results file made elsewhere and install it on its suite's board; returns its new path."""
     source = Path(path)
     doc = check_results(json.loads(source.read_text(encoding="utf-8")), str(source))
-    target = entry_path(board_dir, doc["suite"], doc["agent"], doc["subset"])
+    target = entry_path(board_dir, doc["suite"], doc["agent"], doc["subset"], doc["fidelity"])
     write_json(target, {k: v for k, v in doc.items() if not k.startswith("_")})
     render_readme(board_dir, doc["suite"])
     return target
@@ -263,6 +264,6 @@ def submit(
         episodes=sorted({t.episode for t in selection}), fidelity=selection[0].fidelity,
         wall_s=result.wall_s if result.skipped == 0 else None, workers=workers or os.cpu_count(), backend=backend,
     )
-    path = write_json(entry_path(board_dir, spec.name, agent, doc["subset"]), doc)
+    path = write_json(entry_path(board_dir, spec.name, agent, doc["subset"], doc["fidelity"]), doc)
     render_readme(board_dir, spec.name)
     return path, doc

@@ -23,6 +23,8 @@ from hbmp_bench.evaluation.leaderboard import (
 )
 from hbmp_bench.scenarios import get_suite
 
+FIDELITY = "event"  # the fidelity these submissions run (fast)
+
 pytestmark = pytest.mark.slow
 
 TINY = RunnerLimits(env_factory="tiny_suite:make_env")  # children import the module that registers the suite
@@ -38,7 +40,7 @@ def board(tmp_path_factory):
 
 
 def test_complete_entries_carry_provenance_and_are_ranked(board):
-    doc = json.loads(entry_path(board, tiny_suite.NAME, "expert", subset=False).read_text())
+    doc = json.loads(entry_path(board, tiny_suite.NAME, "expert", subset=False, fidelity=FIDELITY).read_text())
     spec = get_suite(tiny_suite.NAME)
     assert doc["complete"] and not doc["subset"] and doc["expected_episodes"] == 2
     assert doc["suite_hash"] == spec.definition_hash() == doc["provenance"]["suite_definition_hash"]
@@ -51,7 +53,7 @@ def test_complete_entries_carry_provenance_and_are_ranked(board):
     assert [e["episode"] for e in doc["episodes"]] == [0, 1] and all(e["seed"] >= 0 for e in doc["episodes"])
     assert doc["summary"]["success_pct"] == 100.0 and doc["summary"]["episodes"] == 2
     assert doc["aggregates"]["success_pct_by_task"] == {"Straight": 100.0}
-    keep = json.loads(entry_path(board, tiny_suite.NAME, "keep", subset=False).read_text())
+    keep = json.loads(entry_path(board, tiny_suite.NAME, "keep", subset=False, fidelity=FIDELITY).read_text())
     assert keep["summary"]["success_pct"] == 0.0
 
     readme = (board / tiny_suite.NAME / "README.md").read_text()
@@ -72,7 +74,7 @@ def test_a_resubmission_resumes_from_its_records(board):
 def test_a_stale_results_file_is_refused_with_a_clear_message(board, tmp_path):
     copy = tmp_path / "board"
     shutil.copytree(board, copy)
-    path = entry_path(copy, tiny_suite.NAME, "keep", subset=False)
+    path = entry_path(copy, tiny_suite.NAME, "keep", subset=False, fidelity=FIDELITY)
     doc = json.loads(path.read_text())
     doc["suite_hash"] = "0123456789abcdef"
     path.write_text(json.dumps(doc))
@@ -86,8 +88,8 @@ def test_a_stale_results_file_is_refused_with_a_clear_message(board, tmp_path):
 
 
 def test_add_installs_a_checked_results_file(board, tmp_path):
-    target = add_results(entry_path(board, tiny_suite.NAME, "expert", subset=False), tmp_path)
-    assert target == entry_path(tmp_path, tiny_suite.NAME, "expert", subset=False)
+    target = add_results(entry_path(board, tiny_suite.NAME, "expert", subset=False, fidelity=FIDELITY), tmp_path)
+    assert target == entry_path(tmp_path, tiny_suite.NAME, "expert", subset=False, fidelity=FIDELITY)
     assert [e["agent"] for e in load_entries(tmp_path, tiny_suite.NAME)] == ["expert"]
     assert "`expert`" in (tmp_path / tiny_suite.NAME / "README.md").read_text()
 
@@ -98,11 +100,18 @@ def test_a_corl2017_subset_is_written_apart_and_not_ranked(tmp_path, capsys):
                  "--board-dir", str(tmp_path), "--json"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["subset"] and not out["complete"] and out["episodes"] == 1
-    path = entry_path(tmp_path, "corl2017", "expert", subset=True)
-    assert out["results"] == str(path) and path.name == "expert.subset.json"
-    assert not entry_path(tmp_path, "corl2017", "expert", subset=False).exists()
+    path = entry_path(tmp_path, "corl2017", "expert", subset=True, fidelity=FIDELITY)
+    assert out["results"] == str(path) and path.name == f"expert.{FIDELITY}.subset.json"
+    assert not entry_path(tmp_path, "corl2017", "expert", subset=False, fidelity=FIDELITY).exists()
     doc = json.loads(path.read_text())
     assert doc["selection"] == {"towns": ["Town01"], "tasks": ["Straight"], "episodes": [0]}
     readme = (tmp_path / "corl2017" / "README.md").read_text()
     assert "No complete entries yet." in readme
     assert "## Partial runs (not ranked)" in readme and "| – | `expert` | 100.0" in readme
+
+
+def test_each_fidelity_has_its_own_entry(tmp_path):
+    """An agent submitted in event and in continuous fidelity keeps both entries (one table each)."""
+    event = entry_path(tmp_path, "corl2017", "expert", subset=False, fidelity="event")
+    continuous = entry_path(tmp_path, "corl2017", "expert", subset=False, fidelity="continuous")
+    assert event != continuous and event.name == "expert.event.json"
