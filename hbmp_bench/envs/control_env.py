@@ -29,7 +29,7 @@ import numpy as np
 from gymnasium import spaces
 
 from hbmp_bench.envs.behavior_env import BehaviorEnv
-from hbmp_bench.envs.drivers import KEEP, ContinuousConfig
+from hbmp_bench.envs.drivers import KEEP, ContinuousConfig, obstacles_from
 from hbmp_bench.envs.observation import ROAD_FEATURES, followed_path
 from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.planning import Control, instant_costs
@@ -80,8 +80,6 @@ class ControlDriver:
         self._left -= 1
         self.model = bicycle_step(self.model, self._control, self.dt, self.config.vehicle)
         self.off_map = not self.sim.move_to_xy(self.vehicle_id, self.model.xy, self.model.yaw)
-        from hbmp_bench.envs.drivers import obstacles_from
-
         near = np.hypot(*(others.xy - self.model.xy).T) < self.config.obstacle_radius_m if len(others) else []
         obstacles = obstacles_from(others.xy[near], others.yaw[near], others.speed[near], others.length[near],
                                    others.width[near])
