@@ -29,18 +29,16 @@ import numpy as np
 from gymnasium import spaces
 
 from hbmp_bench.envs.behavior_env import BehaviorEnv
-from hbmp_bench.envs.drivers import KEEP, ContinuousConfig, obstacles_from
+from hbmp_bench.envs.drivers import KEEP, ContinuousConfig, ModelDriver
 from hbmp_bench.envs.observation import ROAD_FEATURES, followed_path
 from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.planning import Control, instant_costs
-from hbmp_bench.planning import VehicleState as ModelState
-from hbmp_bench.planning import step as bicycle_step
 from hbmp_bench.sim.sumo import Actors, SumoSim, VehicleState, VehicleType
 
 LANE_WIDTH_M = 3.5
 
 
-class ControlDriver:
+class ControlDriver(ModelDriver):
     """One 0.1 s control step per decision on the bicycle model; SUMO mirrors the pose.
 
     Same protocol as :mod:`hbmp_bench.envs.drivers`; :meth:`set_control` gives the action before
@@ -52,17 +50,13 @@ class ControlDriver:
         self.sim, self.net, self.vehicle_id, self.config = sim, net, vehicle_id, config
         self.planner = dataclasses.replace(config.planner, length=vtype.length, width=vtype.width)
         self.dt = config.executor.dt
-        self.model: ModelState | None = None
+        self.model = None
         self.last_plan = None
         self.path = None
         self._control = Control(0.0, 0.0, 0.0)
         self.off_map = False
         self._left = 0
         self._costs = (0.0, 0.0)
-
-    def reset(self, state: VehicleState) -> None:
-        self.model = ModelState(float(state.xy[0]), float(state.xy[1]), float(state.yaw), max(float(state.speed), 0.0))
-        self.off_map = False
 
     def set_control(self, action: np.ndarray) -> None:
         accel, steer = (float(np.clip(a, -1.0, 1.0)) for a in action)
@@ -78,17 +72,10 @@ class ControlDriver:
         if self._left <= 0:
             return False
         self._left -= 1
-        self.model = bicycle_step(self.model, self._control, self.dt, self.config.vehicle)
-        self.off_map = not self.sim.move_to_xy(self.vehicle_id, self.model.xy, self.model.yaw)
-        near = np.hypot(*(others.xy - self.model.xy).T) < self.config.obstacle_radius_m if len(others) else []
-        obstacles = obstacles_from(others.xy[near], others.yaw[near], others.speed[near], others.length[near],
-                                   others.width[near])
+        self.advance(self._control)
+        obstacles = self.nearby(others)
         self._costs = instant_costs(self.path, self.model, obstacles, self.planner)
         return True
-
-    def observe(self, state: VehicleState) -> VehicleState:
-        m = self.model
-        return dataclasses.replace(state, xy=m.xy, yaw=float(m.yaw), speed=float(m.v))
 
     def behavior_reward(self) -> float:
         """r_t = −dt·(c_dist + c_obs) after the step."""
@@ -140,8 +127,9 @@ class ControlEnv(BehaviorEnv):
     def reset(self, *, seed=None, options=None):
         obs, info = super().reset(seed=seed, options=options)
         w = self.world
-        w.driver.path = followed_path(w.net, w.followed_lane, w._next_edges(), 20.0, 80.0, max_spacing=1.0,
-                                      round_corners=3)
+        cfg = self.config.continuous
+        w.driver.path = followed_path(w.net, w.followed_lane, w._next_edges(), cfg.lane_back_m, cfg.lane_ahead_m,
+                                      max_spacing=1.0, round_corners=3)
         return self._extend(obs), info
 
     def step(self, action):

@@ -26,7 +26,7 @@ import numpy as np
 
 from hbmp_bench.envs.observation import followed_path
 from hbmp_bench.maps.roadnet import RoadNetwork
-from hbmp_bench.planning import (BehaviorConfig, BehaviorExecutor, ExecutorConfig, Obstacles, PlannerConfig,
+from hbmp_bench.planning import (BehaviorConfig, BehaviorExecutor, Control, ExecutorConfig, Obstacles, PlannerConfig,
                                  PlanResult, ReferencePaths, VehicleParams, reference_speed)
 from hbmp_bench.planning import VehicleState as ModelState
 from hbmp_bench.planning import step as bicycle_step
@@ -122,7 +122,40 @@ class EventDriver:
         return {}
 
 
-class ContinuousDriver:
+class ModelDriver:
+    """What every driver of a bicycle model shares: the model's state, taken from SUMO at the
+    start, pushed back into SUMO after every step, and reported to the world in place of SUMO's."""
+
+    sim: SumoSim
+    vehicle_id: str
+    config: ContinuousConfig
+    model: ModelState | None
+
+    def reset(self, state: VehicleState) -> None:
+        """Take the vehicle's pose from SUMO at the start of an episode (speed kept, steering centred)."""
+        self.model = ModelState(float(state.xy[0]), float(state.xy[1]), float(state.yaw), max(float(state.speed), 0.0))
+        self.last_plan = None
+        self.off_map = False
+
+    def nearby(self, others: Actors) -> Obstacles:
+        """The actors within ``config.obstacle_radius_m`` of the model, as planner obstacles."""
+        near = np.hypot(others.xy[:, 0] - self.model.x, others.xy[:, 1] - self.model.y) < self.config.obstacle_radius_m
+        return obstacles_from(others.xy[near], others.yaw[near], others.speed[near], others.length[near],
+                              others.width[near])
+
+    def advance(self, control: Control) -> None:
+        """One control period of the bicycle model; the new pose goes into SUMO (``off_map`` when
+        SUMO cannot place it)."""
+        self.model = bicycle_step(self.model, control, self.config.executor.dt, self.config.vehicle)
+        self.off_map = not self.sim.move_to_xy(self.vehicle_id, self.model.xy, self.model.yaw)
+
+    def observe(self, state: VehicleState) -> VehicleState:
+        """SUMO's lane bookkeeping with the model's exact pose and speed."""
+        m = self.model
+        return dataclasses.replace(state, xy=m.xy, yaw=float(m.yaw), speed=float(m.v))
+
+
+class ContinuousDriver(ModelDriver):
     """The motion planner drives the behavior on a bicycle model; SUMO only mirrors the pose.
 
     Args:
@@ -139,7 +172,6 @@ class ContinuousDriver:
                                       dt=config.executor.dt)
         self.executor = BehaviorExecutor(planner=planner, config=config.executor, behavior_cfg=behavior,
                                          vehicle=config.vehicle)
-        self.dt = config.executor.dt
         self.model: ModelState | None = None
         self.last_plan: PlanResult | None = None
         self.off_map = False
@@ -147,12 +179,6 @@ class ContinuousDriver:
         self._path = functools.lru_cache(maxsize=512)(
             lambda lane, nxt: followed_path(net, lane, nxt, config.lane_back_m, config.lane_ahead_m,
                                             max_spacing=1.0, round_corners=3))
-
-    def reset(self, state: VehicleState) -> None:
-        """Take the vehicle's pose from SUMO at the start of an episode (speed kept, steering centred)."""
-        self.model = ModelState(float(state.xy[0]), float(state.xy[1]), float(state.yaw), max(float(state.speed), 0.0))
-        self.last_plan = None
-        self.off_map = False
 
     def reference_paths(self, lane_id: str, next_edges: tuple[str, ...]) -> ReferencePaths:
         """Centrelines of the left, current and right lane, each continued along the route."""
@@ -172,22 +198,12 @@ class ContinuousDriver:
     def before_step(self, others: Actors) -> bool:
         """Plan and track one control period among ``others`` (every other actor now, predicted at
         constant velocity); push the new pose into SUMO. False when the behavior has finished."""
-        model = self.model
-        near = np.hypot(others.xy[:, 0] - model.x, others.xy[:, 1] - model.y) < self.config.obstacle_radius_m
-        others = obstacles_from(others.xy[near], others.yaw[near], others.speed[near], others.length[near],
-                                others.width[near])
-        control, plan = self.executor.step(model, others)
+        control, plan = self.executor.step(self.model, self.nearby(others))
         self.last_plan = plan
         if self.executor.done:
             return False
-        self.model = bicycle_step(model, control, self.dt, self.config.vehicle)
-        self.off_map = not self.sim.move_to_xy(self.vehicle_id, self.model.xy, self.model.yaw)
+        self.advance(control)
         return True
-
-    def observe(self, state: VehicleState) -> VehicleState:
-        """SUMO's lane bookkeeping with the model's exact pose and speed."""
-        m = self.model
-        return dataclasses.replace(state, xy=m.xy, yaw=float(m.yaw), speed=float(m.v))
 
     def behavior_reward(self) -> float:
         """r_k = lambda(c~_total) of the behavior just executed (see :func:`planning.reward_from_cost`)."""
