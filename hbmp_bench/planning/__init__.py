@@ -1,4 +1,4 @@
-"""Behavior-conditioned motion planning of HBMP (pure numpy, simulator-agnostic).
+"""Behavior-conditioned motion planning of HBMP (numpy, simulator-agnostic).
 
 Modules:
     frame      -- :class:`Path`: curvilinear frame on a lane centerline.
@@ -6,6 +6,7 @@ Modules:
     behaviors  -- :class:`Behavior` enum and the reference-speed rule.
     state      -- :class:`VehicleState`, :class:`Obstacles`.
     planner    -- sampling planner :func:`plan` with the paper's costs.
+    rollout    -- its closed-loop roll-out, the one loop compiled with numba.
     vehicle    -- kinematic bicycle model with actuator limits.
     tracking   -- PID speed + pure-pursuit steering tracker.
     executor   -- :class:`BehaviorExecutor` (replan + track until the behavior ends).

@@ -28,6 +28,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .rollout import UniformSegments
+
 __all__ = ["Path", "wrap_angle"]
 
 
@@ -272,9 +274,24 @@ class Path:
         i1 = int(self._segment_of(hi))
         return np.arange(i0, i1 + 1)[None, :]
 
-    def local_projector(self, n_back: int, n_ahead: int) -> _LocalProjector:
-        """Fast windowed projector for roll-outs (see :class:`_LocalProjector`)."""
-        return _LocalProjector(self, n_back, n_ahead)
+    def uniform_segments(self) -> UniformSegments:
+        """Segment arrays for the compiled roll-out (:func:`.rollout.roll_out`).
+
+        Raises:
+            ValueError: the path is not resampled at uniform arc-length steps (build it with
+                ``resample(..., extrapolate=True)`` over the whole region points can reach:
+                the roll-out's projection does not extend the ends).
+        """
+        step = np.diff(self.s)
+        ds = float(np.mean(step))
+        if np.ptp(step) > 1e-6 * ds:
+            raise ValueError("uniform_segments needs a path resampled at uniform arc-length steps")
+        # Resampling a kinked polyline keeps s uniform, but chords across a kink are shorter
+        # than ds: clip along each chord and convert chord metres to arc length per segment.
+        return UniformSegments(
+            x0=self._x0, y0=self._y0, tx=self._tx, ty=self._ty, chord=self._seg_len,
+            s=self.s[:-1], s_per_m=step / self._seg_len, heading=self.heading[:-1],
+            kappa=self.kappa[:-1], dh=self._dh, dk=self._dk, inv_ds=1.0 / ds)
 
     def frenet(self, xy, hint_s=None, window: tuple[float, float] = (10.0, 40.0)):
         """Arc length and signed lateral offset of points.
@@ -324,62 +341,6 @@ class Path:
         if np.ndim(s) == 0:
             return float(s), float(e), float(theta_e), float(k)
         return s, e, np.broadcast_to(theta_e, s.shape).copy(), k
-
-
-class _LocalProjector:
-    """Vectorised projection that searches only segments ``-n_back..+n_ahead`` around the
-    segment of a predicted arc length, for roll-outs on a UNIFORMLY resampled path.
-
-    Uses complex arithmetic (``z = x + iy``) and the uniform spacing to keep the number of
-    numpy calls per query small. The path ends are NOT extended (points past an end get
-    the distance to the end vertex): build the path with ``resample(..., extrapolate=True)``
-    over the whole region the points can reach. ``__call__(z, s_hint)`` with ``z`` (M,)
-    complex positions [m] and ``s_hint`` (M,) [m] returns ``(s, e, heading, kappa)`` (M,);
-    heading is NOT wrapped.
-    """
-
-    __slots__ = ("p0", "tc", "s", "hk", "dhk", "chord", "s_per_m", "inv_ds", "s_first", "off", "nseg", "_rows")
-
-    def __init__(self, path: Path, n_back: int, n_ahead: int):
-        self.p0 = path._x0 + 1j * path._y0
-        self.tc = path._tx - 1j * path._ty  # conj(tangent): (p - p0) * tc = along + i cross
-        self.s = path.s
-        # heading + i kappa interpolated together (one complex op instead of two real ones)
-        self.hk = path.heading[:-1] + 1j * path.kappa[:-1]
-        self.dhk = path._dh + 1j * path._dk
-        step = np.diff(path.s)
-        ds = float(np.mean(step))
-        if np.ptp(step) > 1e-6 * ds:
-            raise ValueError("_LocalProjector needs a path resampled at uniform arc-length steps")
-        # Resampling a kinked polyline keeps s uniform, but chords across a kink are shorter
-        # than ds: clip along each chord and convert chord metres to arc length per segment.
-        self.chord = path._seg_len
-        self.s_per_m = step / self.chord
-        self.inv_ds = 1.0 / ds
-        self.s_first = float(path.s[0])
-        self.off = np.arange(-int(n_back), int(n_ahead) + 1)
-        self.nseg = path.n_segments
-        self._rows = np.zeros(0, dtype=np.intp)
-
-    def __call__(self, z: np.ndarray, s_hint: np.ndarray):
-        base = ((s_hint - self.s_first) * self.inv_ds).astype(np.intp)
-        idx = np.minimum(np.maximum(base[:, None] + self.off, 0), self.nseg - 1)
-        q = (z[:, None] - self.p0[idx]) * self.tc[idx]
-        along, cross = q.real, q.imag
-        c = np.minimum(np.maximum(along, 0.0), self.chord[idx])
-        d2 = along - c
-        d2 *= d2
-        d2 += cross * cross
-        m, kk = d2.shape
-        if len(self._rows) != m:
-            self._rows = np.arange(0, m * kk, kk)
-        flat = d2.argmin(axis=1)
-        flat += self._rows
-        i = idx.ravel()[flat]
-        c = c.ravel()[flat]
-        e = np.copysign(np.sqrt(d2.ravel()[flat]), cross.ravel()[flat])
-        hk = self.hk[i] + (c / self.chord[i]) * self.dhk[i]
-        return self.s[i] + c * self.s_per_m[i], e, hk.real, hk.imag
 
 
 def _report(along, cross, c, d2, lo, hi):

@@ -69,7 +69,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .control import control_law, linear_speed_profile, omega_limit
-from .frame import Path, wrap_angle
+from .frame import Path
+from .rollout import roll_out
 from .state import Obstacles, VehicleState
 
 __all__ = ["PlannerConfig", "PlanningProblem", "PlanResult", "plan", "COST_NAMES"]
@@ -462,8 +463,8 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
     lim = omega_limit(V, cfg.yaw_rate_max, cfg.max_curvature, cfg.lat_accel_max)
     # gain schedule above gain_speed: k_theta ~ 1/|v|, k_e ~ 1/v^2 (same damping ratio)
     gsc = np.minimum(1.0, cfg.gain_speed / np.maximum(np.abs(V), 1e-9))
-    KTH = (cfg.k_theta * gsc).T
-    KE = (cfg.k_e * gsc * gsc).T
+    KTH = np.ascontiguousarray((cfg.k_theta * gsc).T)
+    KE = np.ascontiguousarray((cfg.k_e * gsc * gsc).T)
 
     # ---- local, uniformly resampled reference for fast windowed projection
     vmax = float(V.max())
@@ -471,34 +472,12 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
     # covers everything a sample can reach (extended straight past the path's ends)
     lp = path.resample(ds, s0 - 10.0 - 2 * ds, s0 + vmax * cfg.horizon + 20.0, extrapolate=True)
 
-    # ---- roll-out (loop over time steps only; vectorised over samples; time-major)
-    Z = np.empty((n + 1, S), dtype=complex)
-    PSI = np.empty((n + 1, S)); SS = np.empty((n + 1, S)); EE = np.empty((n + 1, S))
-    W = np.empty((n, S))
-    z = np.full(S, complex(ego.x, ego.y)); psi = np.full(S, ego.yaw)
-    s = np.full(S, s0); e = np.full(S, e0); th = np.full(S, th0); kap = np.full(S, k0)
-    Z[0], PSI[0], SS[0], EE[0] = z, psi, s, e
+    # ---- roll-out (compiled: sequential in time, see .rollout)
     hold = max(1, round(cfg.omega_hold / dt))
-    VT = np.ascontiguousarray(V.T)
-    STEP = VT * dt
-    LIM = np.ascontiguousarray(lim.T)
-    proj = lp.local_projector(2, 2)  # s advances by <= v dt; +-2 segments of slack
-    W_off = W0 - w_nom
-    for k in range(n):
-        w = control_law(VT[k], kap, e, th, KTH[k], KE[k])
-        if k < hold:
-            w = w + W_off
-        lk = LIM[k]
-        w = np.minimum(np.maximum(w, -lk), lk)
-        W[k] = w
-        step = STEP[k]
-        half = w * (0.5 * dt)
-        z = z + step * np.exp(1j * (psi + half))  # midpoint heading (exact chord direction)
-        psi = psi + (half + half)
-        s, e, h, kap = proj(z, s + step)
-        th = wrap_angle(psi - h)
-        Z[k + 1], PSI[k + 1], SS[k + 1], EE[k + 1] = z, psi, s, e
-    X, Y = Z.real, Z.imag  # (T, S) time-major
+    X, Y, PSI, SS, EE, W = roll_out(
+        ego.x, ego.y, ego.yaw, s0, e0, th0, k0, np.ascontiguousarray(V.T), KTH, KE,
+        np.ascontiguousarray(lim.T), W0 - w_nom, hold, dt, 2, 2,  # +-2 segments of slack
+        *lp.uniform_segments())  # (T, S) time-major
 
     # ---- costs
     t2 = times[1:] ** 2

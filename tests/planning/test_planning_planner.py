@@ -1,6 +1,4 @@
-"""Sampling planner: shapes, cost terms against the paper's formulas, obstacles, timing."""
-
-import time
+"""Sampling planner: shapes, cost terms against the paper's formulas, obstacles."""
 
 import numpy as np
 import pytest
@@ -254,26 +252,6 @@ def test_problem_validation():
         Obstacles(x=[0.0], y=[0.0, 1.0], yaw=[0.0], v=[0.0], length=[1.0], width=[1.0])
     with pytest.raises(ValueError):
         VehicleState(0.0, 0.0, 0.0, -1.0)
-
-
-# ---------------------------------------------------------------------------- timing
-def test_plan_latency_is_reported(capsys):
-    rng = np.random.default_rng(0)
-    K = 20
-    obs = Obstacles(rng.uniform(-20, 80, K), rng.choice([-LANE, 0.0, LANE], K), np.zeros(K),
-                    rng.uniform(5, 12, K), np.full(K, 4.6), np.full(K, 1.9))
-    p = PlanningProblem(VehicleState(0.0, 0.3, 0.05, 10.0), CURRENT, 10.0, 14.0, obs)
-    cfg = PlannerConfig()
-    plan(p, cfg)
-    best = np.inf
-    for _ in range(5):
-        t0 = time.perf_counter()
-        for _ in range(20):
-            plan(p, cfg)
-        best = min(best, (time.perf_counter() - t0) / 20)
-    with capsys.disabled():
-        print(f"\nplan(): {cfg.n_samples} samples x {cfg.n_steps} steps x {K} obstacles: "
-              f"{best * 1e3:.2f} ms per call (best of 5 x 20)")
 
 
 def test_short_path_is_extended_straight():
