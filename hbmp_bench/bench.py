@@ -171,18 +171,26 @@ def _instrumented(env):
     import hbmp_bench.envs.world as world_module
     import hbmp_bench.planning.executor as executor_module
 
+    from hbmp_bench.metrics.detectors import InfractionDetector
+
     world = env.world
-    timers = {"sumo_step": _Timer(world.sim.step), "driver_before_step": _Timer(world.driver.before_step),
-              "planner": _Timer(executor_module.plan), "road_profile": _Timer(world_module.road_profile)}
+    timers = {"sumo_step": _Timer(world.sim.step), "snapshot": _Timer(world.sim.snapshot),
+              "driver_before_step": _Timer(world.driver.before_step),
+              "planner": _Timer(executor_module.plan), "road_profile": _Timer(world_module.road_profile),
+              "detectors": _Timer(InfractionDetector.update)}
     observer = _TimedObserver(world.observer)
     timers["occupancy"] = observer.occupancy
     saved = world.observer, executor_module.plan, world_module.road_profile
-    world.sim.step, world.driver.before_step = timers["sumo_step"], timers["driver_before_step"]
+    world.sim.step, world.sim.snapshot = timers["sumo_step"], timers["snapshot"]
+    world.driver.before_step = timers["driver_before_step"]
     world.observer, executor_module.plan, world_module.road_profile = observer, timers["planner"], timers["road_profile"]
+    detector_timer = timers["detectors"]
+    InfractionDetector.update = lambda self, *args: detector_timer(self, *args)  # the detector is per episode
     try:
         yield timers
     finally:
-        del world.sim.step, world.driver.before_step
+        del world.sim.step, world.sim.snapshot, world.driver.before_step
+        InfractionDetector.update = detector_timer.fn
         world.observer, executor_module.plan, world_module.road_profile = saved
 
 
@@ -224,8 +232,9 @@ def measure_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float | Non
         agent.reset(info)
         with _instrumented(env) as timers:
             while stepping < seconds:
+                action = agent.act(obs, info)  # the agent's time is not the env's
                 t0 = time.perf_counter()
-                obs, _, terminated, truncated, info = env.step(agent.act(obs, info))
+                obs, _, terminated, truncated, info = env.step(action)
                 stepping += time.perf_counter() - t0
                 decisions += 1
                 sim_steps += int(round(info["duration_s"] / step_length))

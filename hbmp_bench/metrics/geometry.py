@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import functools
+import math
+
 import numpy as np
 
 from hbmp_bench.maps.roadnet import RoadNetwork
@@ -32,13 +35,23 @@ def boxes_overlap(box: np.ndarray, others: np.ndarray) -> np.ndarray:
     return overlap
 
 
-def footprint_points(xy: np.ndarray, yaw: float, length: float, width: float, n_long: int = 5, n_lat: int = 3) -> np.ndarray:
-    """A regular grid of n_long × n_lat points (P, 2) covering a box evenly (each stands for 1/P of its area)."""
+@functools.lru_cache(maxsize=64)
+def _footprint_offsets(length: float, width: float, n_long: int, n_lat: int) -> tuple[np.ndarray, np.ndarray]:
+    """Body-frame offsets (P,), (P,) [m] of :func:`footprint_points` (one per vehicle size, cached)."""
     u = (np.arange(n_long) + 0.5) / n_long - 0.5
     v = (np.arange(n_lat) + 0.5) / n_lat - 0.5
     uu, vv = np.meshgrid(u * length, v * width, indexing="ij")
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.stack([xy[0] + c * uu.ravel() - s * vv.ravel(), xy[1] + s * uu.ravel() + c * vv.ravel()], axis=1)
+    return uu.ravel(), vv.ravel()
+
+
+def footprint_points(xy: np.ndarray, yaw: float, length: float, width: float, n_long: int = 5, n_lat: int = 3) -> np.ndarray:
+    """A regular grid of n_long × n_lat points (P, 2) covering a box evenly (each stands for 1/P of its area)."""
+    uu, vv = _footprint_offsets(float(length), float(width), n_long, n_lat)
+    c, s = math.cos(yaw), math.sin(yaw)
+    out = np.empty((len(uu), 2))
+    out[:, 0] = xy[0] + c * uu - s * vv
+    out[:, 1] = xy[1] + s * uu + c * vv
+    return out
 
 
 def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:

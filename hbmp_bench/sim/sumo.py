@@ -74,9 +74,13 @@ class Actors:
 
     def without(self, actor_id: str) -> "Actors":
         """The same snapshot less one actor (e.g. the ego)."""
-        keep = np.array([i != actor_id for i in self.ids], dtype=bool)
+        if actor_id not in self.ids:
+            return self
+        at = self.ids.index(actor_id)
+        keep = np.ones(len(self.ids), dtype=bool)
+        keep[at] = False
         return Actors(
-            ids=tuple(i for i in self.ids if i != actor_id),
+            ids=self.ids[:at] + self.ids[at + 1:],
             xy=self.xy[keep],
             yaw=self.yaw[keep],
             speed=self.speed[keep],
@@ -279,9 +283,9 @@ class SumoSim:
             results.extend(getter().items())
         k = len(results)
         ids = tuple(r[0] for r in results)
-        pos = np.array([r[1][tc.VAR_POSITION] for r in results], dtype=float).reshape(k, 2)
-        yaw = sumo_angle_to_yaw(np.array([r[1][tc.VAR_ANGLE] for r in results], dtype=float))
-        speed = np.array([r[1][tc.VAR_SPEED] for r in results], dtype=float)
+        pos_, angle_, speed_ = tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED
+        rows = np.array([(*v[pos_], v[angle_], v[speed_]) for _, v in results], dtype=float).reshape(k, 4)
+        pos, yaw, speed = rows[:, :2], sumo_angle_to_yaw(rows[:, 2]), rows[:, 3]
         if self._snapshot_dims is None or self._snapshot_dims[0] != ids:  # actors rarely change: cache
             dims = np.array([self._dims.get(i, (4.5, 1.8, False)) for i in ids], dtype=float).reshape(k, 3)
             cached = (dims[:, 0].copy(), dims[:, 1].copy(), dims[:, 2].astype(bool))
