@@ -9,10 +9,11 @@ each town, env reset seed 0):
   every subscription is dropped, the ego is given back to SUMO's driver and only
   ``libsumo.simulationStep()`` runs for ``raw_steps`` steps (:meth:`SumoSim.time_raw_steps`).
 - **env**: :class:`BehaviorEnv` with the expert agent in ``event`` and ``continuous`` fidelity for a
-  fixed wall time (agent time included, reset time excluded; the episode restarts when it ends).
-  Sim steps = Σ ``info["duration_s"]`` / step length. Ratio = env sim steps/s ÷ raw steps/s.
-  While it runs, the SUMO step, the driver's control period, the planner call, M_t and R_t are
-  timed in place (a ``perf_counter`` pair each, ~1 µs).
+  fixed wall time of ``env.step`` (the agent's and the resets' time excluded; the episode restarts
+  when it ends). Sim steps = Σ ``info["duration_s"]`` / step length. Ratio = env sim steps/s ÷ raw
+  steps/s. While it runs, the SUMO step, the actor snapshot, the driver's control period, the
+  planner call, the infraction detectors, M_t and R_t are timed in place (a ``perf_counter`` pair
+  each, ~1 µs).
 - **highway-env** ``highway-fast-v0`` and ``intersection-v0``: random actions, decisions/s.
 - **scaling**: 1 and 2 worker processes (spawned, one env each, random actions, started together
   behind a barrier), total decisions/s; the workers also report their peak memory (``ru_maxrss``).
