@@ -143,7 +143,8 @@ def plot_run(folder: str, title: str, window: int = 50) -> str:
 
 
 def plot_comparison(folders: Sequence[str], labels: Sequence[str], out: str, window: int = 50) -> str:
-    """The paper's ablation figure: r_T and r_T + Σr_t per episode for several runs, one PNG."""
+    """The paper's ablation figure: r_T and r_T + Σr_t per episode for several runs, plus their
+    success rates, one PNG (trailing means over ``window`` episodes)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -151,15 +152,15 @@ def plot_comparison(folders: Sequence[str], labels: Sequence[str], out: str, win
 
     if len(folders) != len(labels):
         raise ValueError("give one label per run folder")
-    fig, axes = plt.subplots(1, 2, figsize=(11, 3.8), sharey=False)
+    fig, axes = plt.subplots(1, 3, figsize=(16, 3.8), sharey=False)
     for k, (folder, label) in enumerate(zip(folders, labels)):
         eps = read_csv(os.path.join(folder, "episodes.csv"))
-        for ax, key in zip(axes, ("r_T", "r_T_plus_r_t")):
+        for ax, key in zip(axes, ("r_T", "r_T_plus_r_t", "success")):
             ax.plot(eps["episode"], moving_average(eps[key], window), color=f"C{k}", label=label)
     axes[0].set(xlabel="episode", ylabel=f"r_T (mean of {window})")
     axes[1].set(xlabel="episode", ylabel=f"r_T + Σr_t (mean of {window})")
-    for ax in axes:
-        ax.legend(fontsize=8)
+    axes[2].set(xlabel="episode", ylabel=f"success rate (mean of {window})", ylim=(-0.02, None))
+    axes[2].legend(fontsize=8)
     fig.tight_layout()
     _save_fig(fig, out)
     plt.close(fig)
