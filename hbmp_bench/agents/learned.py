@@ -12,6 +12,8 @@ trained on (``env_kwargs``): evaluate a vehicle-centric policy on an env made wi
 
 from __future__ import annotations
 
+import hashlib
+
 import os
 from importlib import resources
 from typing import Any
@@ -60,6 +62,8 @@ class LearnedAgent:
         env_kwargs: the observation options the policy needs from the env (``observation``), to
             pass to ``make``; empty for the default deformed M_t.
         trained_env: every environment option of its training run (id, fidelity, density ...).
+        fingerprint: sha256 of the checkpoint file (first 16 hex digits): which weights drove an
+            evaluation, so a resumed one never mixes two checkpoints under one name.
     """
 
     def __init__(self, checkpoint: str, name: str | None = None, device: str = "cpu"):
@@ -69,6 +73,8 @@ class LearnedAgent:
 
         ckpt = load_checkpoint(checkpoint)
         self.checkpoint = checkpoint
+        with open(checkpoint, "rb") as f:
+            self.fingerprint = hashlib.sha256(f.read()).hexdigest()[:16]
         self.kind = ckpt["kind"]
         self.name = name or self.kind
         model = ckpt["model"]

@@ -131,12 +131,16 @@ def evaluate(
     if backend not in BACKENDS:
         raise UnknownNameError("backend", backend, BACKENDS)
     selection = suite_tasks(suite, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity)
+    fingerprint = ""
     if check_agent:
         from hbmp_bench.agents import load_agent
 
-        limits = with_agent_env(limits, load_agent(agent))
+        built = load_agent(agent)
+        limits = with_agent_env(limits, built)
+        fingerprint = getattr(built, "fingerprint", "")
     path = Path(path) if path is not None else records_path(out_dir, selection[0].suite, agent)
     path.parent.mkdir(parents=True, exist_ok=True)
+    check_agent_fingerprint(path, agent, fingerprint)
     repair_records(path)
     finished = {r.key for r in _read(path) if r.end_reason != SIM_ERROR}
     todo = [t for t in selection if t.key not in finished]
@@ -150,6 +154,28 @@ def evaluate(
     records = sorted((r for r in _read(path) if r.key in wanted), key=lambda r: wanted[r.key])
     return EvaluationResult(path, tuple(records), ran, len(selection) - len(todo), time.perf_counter() - start,
                             len(selection) - len(records))
+
+
+def check_agent_fingerprint(path: Path, agent: str, fingerprint: str) -> None:
+    """Refuse to resume ``path`` with other weights than those that began it.
+
+    Records are keyed by agent name, so a retrained checkpoint under the same name would
+    otherwise be credited with the old one's episodes. An agent with a ``fingerprint`` (learned
+    agents: their checkpoint's hash) leaves it in ``<records>.agent`` beside the records.
+    """
+    if not fingerprint:
+        return
+    side = path.with_name(path.name + ".agent")
+    if side.exists():
+        previous = side.read_text().strip()
+        if previous != fingerprint:
+            raise ValueError(
+                f"{path} holds episodes of another {agent!r} (checkpoint {previous}, now {fingerprint}): "
+                f"evaluate into another folder (--out) or delete {path.name} and {side.name} to start over")
+    elif not path.exists() or path.stat().st_size == 0:
+        tmp = side.with_name(side.name + ".tmp")
+        tmp.write_text(fingerprint + "\n")
+        os.replace(tmp, side)
 
 
 def with_agent_env(limits: RunnerLimits, agent) -> RunnerLimits:
