@@ -69,6 +69,44 @@ def _load_class(path: str):
     return getattr(importlib.import_module(module), name)
 
 
+def _vehicle_classes() -> tuple[type, ...]:
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    def subclasses(cls):
+        return (cls, *(s for sub in cls.__subclasses__() for s in subclasses(sub)))
+
+    return tuple(dict.fromkeys(subclasses(IDMVehicle)))
+
+
+_VEHICLE_CLASS_PARAMS = ("DISTANCE_WANTED", "COMFORT_ACC_MAX", "COMFORT_ACC_MIN", "TIME_WANTED", "DELTA")
+
+
+def _own_params(cls: type) -> dict[str, Any]:
+    return {name: cls.__dict__[name] for name in _VEHICLE_CLASS_PARAMS if name in cls.__dict__}
+
+
+_VEHICLE_CLASS_DEFAULTS: dict[type, dict[str, Any]] = {cls: _own_params(cls) for cls in _vehicle_classes()}
+"""highway-env's traffic-model parameters as the library defines them (taken when this module loads)."""
+
+
+def _restore_vehicle_class_defaults() -> None:
+    """Undo highway-env's process-wide changes to its traffic models before every episode.
+
+    highway-env's intersection scene sets ``DISTANCE_WANTED``, ``COMFORT_ACC_MAX`` and
+    ``COMFORT_ACC_MIN`` on its traffic class (highway_env/envs/intersection_env.py), so every
+    scene run later in the same process had more aggressive traffic: the same seed gave another
+    episode depending on what ran before. The intersection scene sets its values again when it
+    builds its vehicles.
+    """
+    for cls in _vehicle_classes():
+        own = _VEHICLE_CLASS_DEFAULTS.setdefault(cls, _own_params(cls))
+        for name in _VEHICLE_CLASS_PARAMS:
+            if name in own:
+                setattr(cls, name, own[name])
+            elif name in cls.__dict__:  # set on a subclass by a scene: inherit again
+                delattr(cls, name)
+
+
 class HighwayTransferEnv(gym.Env):
     """HBMP behavior layer on a highway-env scene (zero-shot transfer from SUMO).
 
@@ -148,6 +186,7 @@ class HighwayTransferEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
+        _restore_vehicle_class_defaults()
         hw_seed = int(self.np_random.integers(2**31))
         self.highway_env.reset(seed=hw_seed)
         opts = options or {}

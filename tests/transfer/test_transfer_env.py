@@ -169,3 +169,16 @@ def test_bad_input_is_a_clear_error():
         with pytest.raises(ValueError, match="action must be an int"):
             env.step(bad)
     env.close()
+
+
+def test_a_scene_plays_the_same_whatever_ran_before_in_the_process():
+    """highway-env's intersection scene changes its traffic model's class parameters; the adapter
+    puts them back, so a seed gives the same episode before and after an intersection ran."""
+    from hbmp_bench.transfer.evaluate import run_transfer_episodes
+
+    def decisions(scene):
+        return [(r.decisions, r.success, r.end_reason) for r in run_transfer_episodes("keep", scene, 2)]
+
+    before = decisions("highway")
+    run_transfer_episodes("keep", "intersection", 1)
+    assert decisions("highway") == before
