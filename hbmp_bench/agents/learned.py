@@ -13,7 +13,6 @@ trained on (``env_kwargs``): evaluate a vehicle-centric policy on an env made wi
 from __future__ import annotations
 
 import hashlib
-
 import os
 from importlib import resources
 from typing import Any

@@ -70,6 +70,7 @@ def _load_class(path: str):
 
 
 def _vehicle_classes() -> tuple[type, ...]:
+    """highway-env's traffic model ``IDMVehicle`` and all its subclasses."""
     from highway_env.vehicle.behavior import IDMVehicle
 
     def subclasses(cls):
