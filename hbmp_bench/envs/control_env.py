@@ -30,7 +30,7 @@ from gymnasium import spaces
 
 from hbmp_bench.envs.behavior_env import BehaviorEnv
 from hbmp_bench.envs.drivers import KEEP, ContinuousConfig, ModelDriver
-from hbmp_bench.envs.observation import ROAD_FEATURES, followed_path
+from hbmp_bench.envs.observation import ROAD_FEATURES
 from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.planning import Control, instant_costs
 from hbmp_bench.sim.sumo import Actors, SumoSim, VehicleState, VehicleType
@@ -47,14 +47,11 @@ class ControlDriver(ModelDriver):
 
     def __init__(self, sim: SumoSim, net: RoadNetwork, vehicle_id: str, vtype: VehicleType,
                  config: ContinuousConfig):
-        self.sim, self.net, self.vehicle_id, self.config = sim, net, vehicle_id, config
+        super().__init__(sim, net, vehicle_id, config)
         self.planner = dataclasses.replace(config.planner, length=vtype.length, width=vtype.width)
         self.dt = config.executor.dt
-        self.model = None
-        self.last_plan = None
         self.path = None
         self._control = Control(0.0, 0.0, 0.0)
-        self.off_map = False
         self._left = 0
         self._costs = (0.0, 0.0)
 
@@ -63,8 +60,7 @@ class ControlDriver(ModelDriver):
         self._control = Control(steer=steer, throttle=max(accel, 0.0), brake=max(-accel, 0.0))
 
     def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...]) -> int:
-        self.path = followed_path(self.net, lane, tuple(next_edges), self.config.lane_back_m,
-                                  self.config.lane_ahead_m, max_spacing=1.0, round_corners=3)
+        self.path = self.lane_path(lane, next_edges)
         self._left = 1
         return KEEP
 
@@ -104,7 +100,6 @@ class ControlEnv(BehaviorEnv):
             raise ValueError(f"the control env always runs the bicycle model; fidelity must be 'continuous', got {fidelity!r}")
         super().__init__(*args, fidelity="continuous", **kwargs)
         self.action_space = spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
-        rows, cols = self.observation_space["occupancy"].shape[1:]
         self.observation_space = spaces.Dict(
             occupancy=self.observation_space["occupancy"],
             road=spaces.Box(-2.0, 2.0, (len(ROAD_FEATURES) + 2,), dtype=np.float32),
@@ -127,9 +122,7 @@ class ControlEnv(BehaviorEnv):
     def reset(self, *, seed=None, options=None):
         obs, info = super().reset(seed=seed, options=options)
         w = self.world
-        cfg = self.config.continuous
-        w.driver.path = followed_path(w.net, w.followed_lane, w._next_edges(), cfg.lane_back_m, cfg.lane_ahead_m,
-                                      max_spacing=1.0, round_corners=3)
+        w.driver.path = w.driver.lane_path(w.followed_lane, w._next_edges())
         return self._extend(obs), info
 
     def step(self, action):

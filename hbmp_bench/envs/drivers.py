@@ -126,10 +126,19 @@ class ModelDriver:
     """What every driver of a bicycle model shares: the model's state, taken from SUMO at the
     start, pushed back into SUMO after every step, and reported to the world in place of SUMO's."""
 
-    sim: SumoSim
-    vehicle_id: str
-    config: ContinuousConfig
-    model: ModelState | None
+    def __init__(self, sim: SumoSim, net: RoadNetwork, vehicle_id: str, config: ContinuousConfig):
+        self.sim, self.net, self.vehicle_id, self.config = sim, net, vehicle_id, config
+        self.model: ModelState | None = None
+        self.last_plan: PlanResult | None = None
+        self.off_map = False
+        """The model's pose is too far from the route for SUMO to place the vehicle there."""
+        self._path = functools.lru_cache(maxsize=512)(
+            lambda lane, nxt: followed_path(net, lane, nxt, config.lane_back_m, config.lane_ahead_m,
+                                            max_spacing=1.0, round_corners=3))
+
+    def lane_path(self, lane_id: str, next_edges: tuple[str, ...]):
+        """The (rounded, densified) centreline of ``lane_id`` continued along ``next_edges``; cached."""
+        return self._path(lane_id, tuple(next_edges))
 
     def reset(self, state: VehicleState) -> None:
         """Take the vehicle's pose from SUMO at the start of an episode (speed kept, steering centred)."""
@@ -167,24 +176,17 @@ class ContinuousDriver(ModelDriver):
 
     def __init__(self, sim: SumoSim, net: RoadNetwork, vehicle_id: str, vtype: VehicleType,
                  config: ContinuousConfig, behavior: BehaviorConfig):
-        self.sim, self.net, self.vehicle_id, self.config = sim, net, vehicle_id, config
+        super().__init__(sim, net, vehicle_id, config)
         planner = dataclasses.replace(config.planner, length=vtype.length, width=vtype.width,
                                       dt=config.executor.dt)
         self.executor = BehaviorExecutor(planner=planner, config=config.executor, behavior_cfg=behavior,
                                          vehicle=config.vehicle)
-        self.model: ModelState | None = None
-        self.last_plan: PlanResult | None = None
-        self.off_map = False
-        """The model's pose is too far from the route for SUMO to place the vehicle there."""
-        self._path = functools.lru_cache(maxsize=512)(
-            lambda lane, nxt: followed_path(net, lane, nxt, config.lane_back_m, config.lane_ahead_m,
-                                            max_spacing=1.0, round_corners=3))
 
     def reference_paths(self, lane_id: str, next_edges: tuple[str, ...]) -> ReferencePaths:
         """Centrelines of the left, current and right lane, each continued along the route."""
         sides = [self.net.neighbour_lane(lane_id, side) for side in (+1, -1)]
-        left, right = (None if lane is None else self._path(lane, next_edges) for lane in sides)
-        return ReferencePaths(left, self._path(lane_id, next_edges), right)
+        left, right = (None if lane is None else self.lane_path(lane, next_edges) for lane in sides)
+        return ReferencePaths(left, self.lane_path(lane_id, next_edges), right)
 
     def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...]) -> int:
         """Start ``behavior`` on the centreline of ``lane`` continued along ``next_edges`` (in a
