@@ -16,7 +16,7 @@ from hbmp_bench.envs.drivers import FIDELITIES, LANE_CHANGE_CUTOFF_M, Continuous
 from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, road_profile
 from hbmp_bench.maps import net_path
 from hbmp_bench.maps.roadnet import RoadNetwork
-from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents
+from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents, StopLine
 from hbmp_bench.metrics.geometry import LaneLocator
 from hbmp_bench.metrics.records import EpisodeRecord, driving_score
 from hbmp_bench.planning.behaviors import BehaviorConfig
@@ -318,10 +318,11 @@ class DrivingWorld:
         self._update_progress(state)
         self._light = self.sim.light_ahead(EGO_ID)
         actors = snapshot.without(EGO_ID)
+        lane = self._followed_lane
         ev = self.detector.update(
             EgoFrame(state.xy, state.yaw, EGO_TYPE.length, EGO_TYPE.width,
-                     None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance, self._light.state),
-                     self.net.lanes[state.lane].edge if state.lane in self.net.lanes else ""),
+                     followed_stop_line(self.sim, self.locator, lane, next(iter(self._next_edges(1)), None)),
+                     self.net.lanes[lane].edge if lane in self.net.lanes else ""),
             actors.ids, actors.xy, actors.yaw, actors.length, actors.width, actors.is_pedestrian, self.sim.time,
         )
         self._actors = actors
@@ -463,6 +464,19 @@ def terminal_reward(ev: StepEvents, timed_out: bool = False) -> float:
         + r["wrong_lane"] * ev.wrong_lane
         + r["off_road"] * ev.off_road
     )
+
+
+def followed_stop_line(sim: SumoSim, locator: LaneLocator, lane: str, next_edge: str | None) -> StopLine | None:
+    """The signalised stop line at the end of the followed ``lane`` on the way to the route's
+    ``next_edge``, with its link's signal now (None where that link has no traffic light).
+
+    The detectors judge red lights on it: the lane and route the vehicle follows, not the light
+    ahead that SUMO's map matching of a pushed pose reports."""
+    fixed = locator.stop_line(lane, next_edge)
+    if fixed is None:
+        return None
+    ends, direction, tls, link_index = fixed
+    return StopLine(lane, ends, direction, sim.light_state(tls, link_index))
 
 
 def accumulate(total: StepEvents, ev: StepEvents) -> None:
