@@ -18,7 +18,7 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from hbmp_bench.errors import UnknownNameError
+from hbmp_bench.errors import Interrupted, UnknownNameError, UserError
 from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, agent_slug, suite_tasks
 from hbmp_bench.metrics.records import SIM_ERROR, EpisodeRecord, append_record, latest_per_key, read_records, repair_records
@@ -47,6 +47,21 @@ class EvaluationResult:
     missing: int
 
 
+class EvaluationInterrupted(Interrupted):
+    """Ctrl-C during ``evaluate``, after its processes ended: ``path`` keeps ``finished`` of the
+    ``selected`` episodes; the same evaluation again runs the rest."""
+
+    def __init__(self, path: Path, finished: int, selected: int):
+        self.path, self.finished, self.selected = path, finished, selected
+        super().__init__(f"{finished} of {selected} episodes are recorded in {path}; "
+                         "run the same evaluation again to resume")
+
+
+def _check_workers(workers: int | None) -> None:
+    if workers is not None and workers < 1:
+        raise UserError(f"workers must be >= 1 (parallel episode slots), got {workers}")
+
+
 def records_path(out_dir: str | os.PathLike, suite: str, agent: str) -> Path:
     """``<out_dir>/<suite>__<agent slug>.jsonl``."""
     return Path(out_dir) / f"{suite}__{agent_slug(agent)}.jsonl"
@@ -71,8 +86,7 @@ def iter_outcomes(
 
     if backend not in BACKENDS:
         raise UnknownNameError("backend", backend, BACKENDS)
-    if workers is not None and workers <= 0:
-        raise ValueError(f"workers must be > 0, got {workers}")
+    _check_workers(workers)
     limits = limits or RunnerLimits()
     if not tasks:
         return
@@ -124,12 +138,17 @@ def evaluate(
         limits: timeouts, watchdog and retries; ``max_decisions`` is refused (capped episodes
             are no evaluation).
         check_agent: build the agent once here first, so a bad name fails before any episode.
+
+    Every option is checked before anything is written. Ctrl-C (``KeyboardInterrupt``) ends the
+    episodes in flight and their processes, keeps every finished record, and raises
+    :class:`EvaluationInterrupted`, which says how many are kept; calling again resumes.
     """
     limits = limits or RunnerLimits()
     if limits.max_decisions is not None:
         raise ValueError("evaluate runs whole episodes: limits.max_decisions must be None")
     if backend not in BACKENDS:
         raise UnknownNameError("backend", backend, BACKENDS)
+    _check_workers(workers)
     selection = suite_tasks(suite, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity)
     fingerprint = ""
     if check_agent:
@@ -146,10 +165,14 @@ def evaluate(
     todo = [t for t in selection if t.key not in finished]
     start = time.perf_counter()
     ran = 0
-    for outcome in iter_outcomes(todo, workers=workers, backend=backend, address=address, limits=limits,
-                                 progress=progress):
-        append_record(path, outcome.record)
-        ran += 1
+    try:
+        for outcome in iter_outcomes(todo, workers=workers, backend=backend, address=address, limits=limits,
+                                     progress=progress):
+            append_record(path, outcome.record)
+            ran += 1
+    except KeyboardInterrupt:  # the pool has ended its processes on the way out
+        kept = len(selection) - len(todo) + ran
+        raise EvaluationInterrupted(path, kept, len(selection)) from None
     wanted = {t.key: k for k, t in enumerate(selection)}
     records = sorted((r for r in _read(path) if r.key in wanted), key=lambda r: wanted[r.key])
     return EvaluationResult(path, tuple(records), ran, len(selection) - len(todo), time.perf_counter() - start,
