@@ -149,8 +149,16 @@ def adopt_environment(environ: dict[str, str] | None) -> None:
 
 def watch_lifeline(lifeline) -> None:
     """End this (child) process as soon as ``lifeline`` reaches EOF: the pool holds the only write
-    end, so a killed or crashed pool takes its children with it, even an agent hung in ``act``."""
+    end, so a killed or crashed pool takes its children with it, even an agent hung in ``act``.
+
+    The pool alone ends its children: Ctrl-C in a terminal signals the whole process group, and
+    the children ignore it, so they neither print tracebacks nor die before the pool stops them.
+    """
+    import signal
     import threading
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
     def wait_for_eof() -> None:
         try:
