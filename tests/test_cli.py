@@ -210,3 +210,24 @@ def test_is_user_error():
         raise ValueError("speed must be >= 0")
 
     assert cli.is_user_error(raised(validate))  # a raise statement: validation
+
+
+def test_train_resume_hint_follows_what_the_interrupt_left(tmp_path):
+    from hbmp_bench.training.checkpoints import save_checkpoint
+    from hbmp_bench.training.commands import _resume_hint
+
+    args = cli.build_parser().parse_args(["train", "il", "--episodes", "10", "--save-every", "5", "--out",
+                                          str(tmp_path)])
+    assert _resume_hint(args) == f"no checkpoint was written yet (one every 5 episodes); start over with another " \
+                                 f"--out than {tmp_path}"
+    checkpoint = tmp_path / "checkpoint.pt"
+    for done in (5, 10):
+        save_checkpoint(str(checkpoint), {"kind": "il", "progress": {"episodes": done}})
+        hint = _resume_hint(args)
+        if done == 5:
+            assert hint.startswith(f"the last checkpoint is {checkpoint} (5 of 10 episodes); resume with: hbmp-bench "
+                                   "train il ")
+            assert hint.endswith(f"--out {tmp_path} --resume {checkpoint}")
+        else:  # interrupted after the last checkpoint, while writing the outputs: nothing to resume
+            assert hint == f"all 10 episodes are trained ({checkpoint}); {tmp_path / 'policy.pt'}, the curves or the " \
+                           "model card may be missing"

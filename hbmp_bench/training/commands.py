@@ -109,12 +109,18 @@ def _cmd_train(args: argparse.Namespace) -> int:
 
 def _resume_hint(args: argparse.Namespace) -> str:
     """What an interrupted ``train`` left and the command that continues it."""
+    from hbmp_bench.training.checkpoints import load_checkpoint
+
     checkpoint = os.path.join(args.out, "checkpoint.pt")
     if not os.path.isfile(checkpoint):
         return (f"no checkpoint was written yet (one every {args.save_every} episodes); "
                 f"start over with another --out than {args.out}")
+    done = load_checkpoint(checkpoint, kinds=(args.kind,))["progress"]["episodes"]
+    if done >= args.episodes:
+        return (f"all {done} episodes are trained ({checkpoint}); {os.path.join(args.out, 'policy.pt')}, "
+                "the curves or the model card may be missing")
     again = _command_line(argparse.Namespace(**{**vars(args), "resume": checkpoint}))
-    return f"the last checkpoint is {checkpoint}; resume with: {again}"
+    return f"the last checkpoint is {checkpoint} ({done} of {args.episodes} episodes); resume with: {again}"
 
 
 def _cmd_curves(args: argparse.Namespace) -> int:
