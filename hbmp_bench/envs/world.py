@@ -338,18 +338,32 @@ class DrivingWorld:
         return ev
 
     def _update_progress(self, state) -> None:
-        """Progress [m] = route length − distance still to drive along the current route."""
-        k = self._route_pos.get(self.net.lane(state.lane).edge) if state.lane in self.net.lanes else None
-        if k is None:
+        """Progress [m] = route length − distance still to drive along the current route's lanes,
+        junction lanes included (``RoutePath``). On a route edge the front bumper's lane position
+        counts; inside the junction after the followed lane's edge, the front bumper's projection
+        on the route's junction lanes, so progress runs on through a junction without a jump."""
+        path = self._route_path
+        if state.lane in self.net.lanes:
+            k = self._route_pos.get(self.net.lanes[state.lane].edge)
+            if k is None:
+                return
+            at = path.position(k, state.lane_pos)
+        elif state.lane in self.net.internal_lanes and self._followed_lane in self.net.lanes:
+            k = self._route_pos.get(self.net.lanes[self._followed_lane].edge)
+            if k is None or k + 1 >= len(self.route):
+                return
+            front = state.xy + EGO_TYPE.length / 2 * np.array([np.cos(state.yaw), np.sin(state.yaw)])
+            at = path.junction_position(k, front)
+        else:
             return
-        remaining = self._route_offsets[-2] + self.episode.goal_pos - (self._route_offsets[k] + state.lane_pos)
+        remaining = path.position(len(self.route) - 1, self.episode.goal_pos) - at
         progress = self.episode.route_length_m - remaining
         if progress <= self.episode.route_length_m + 5.0:
             self.progress_m = max(self.progress_m, min(progress, self.episode.route_length_m))
 
     def _set_route(self, route: tuple[str, ...]) -> None:
         self.route = tuple(route)
-        self._route_offsets = np.concatenate([[0.0], np.cumsum([self.net.edge_length[e] for e in self.route])])
+        self._route_path = self.net.route_path(self.route, self.episode.start_lane, self.episode.goal_lane)
         self._route_pos = {e: i for i, e in enumerate(self.route)}
 
     def _keep_route_reachable(self) -> None:

@@ -54,6 +54,14 @@ class Lane:
     width: float
     speed: float
 
+    @functools.cached_property
+    def shape_length(self) -> float:
+        """Length of the drawn shape [m], what a car in this lane drives. SUMO's ``length`` (the unit
+        of lane positions) is shared by all lanes of an edge, so on a curved multi-lane edge it can
+        differ from the shape's by a few percent (20% on a roundabout's inner lane)."""
+        seg = np.diff(self.shape, axis=0)
+        return float(np.hypot(seg[:, 0], seg[:, 1]).sum())
+
 
 class RoadNetwork:
     """Drivable lane graph of one SUMO net.
@@ -254,15 +262,144 @@ class RoadNetwork:
         return self.edge_lanes[edge][0]
 
     def position(self, lane_id: str, pos: float) -> np.ndarray:
-        """Point (2,) [m] at distance ``pos`` [m] along a lane's shape."""
-        return point_along(self.lane(lane_id).shape, pos)
+        """Point (2,) [m] at SUMO lane position ``pos`` [m] (0 .. ``length``) of a lane: like SUMO,
+        the position is scaled onto the drawn shape (by ``shape_length / length``)."""
+        lane = self.lane(lane_id)
+        return point_along(lane.shape, pos * (lane.shape_length / lane.length if lane.length > 0 else 1.0))
 
-    def route_length(self, route: tuple[str, ...], start_pos: float, goal_pos: float) -> float:
-        """Driven length [m] from ``start_pos`` on route[0] to ``goal_pos`` on route[-1]."""
-        if len(route) == 1:
-            return goal_pos - start_pos
-        middle = sum(self.edge_length[e] for e in route[1:-1])
-        return self.edge_length[route[0]] - start_pos + middle + goal_pos
+    # ------------------------------------------------------------- routes
+    def link_lanes(self, link: Connection) -> tuple[str, ...]:
+        """The internal (junction) lanes a link runs over, in driving order; () if it has none."""
+        lanes, lane = [], link.via
+        while lane in self.internal_lanes:
+            lanes.append(lane)
+            lane = self.follow(lane, link.to_edge)
+        return tuple(lanes)
+
+    def route_link(self, edge: str, to_edge: str, lane_id: str) -> Connection:
+        """The link from ``edge`` onto ``to_edge`` that a car in ``lane_id`` (a lane of ``edge``) takes:
+        its own lane's link where it has one (the one that keeps the lane index, if several), else
+        the link of the nearest lane that has one (the car changes lanes on ``edge``)."""
+        links = self.links(edge, to_edge)
+        if not links:
+            raise ValueError(f"no link from {edge!r} to {to_edge!r} in {self.path.name}")
+        index = self.lane(lane_id).index
+        return min(links, key=lambda c: (abs(self.lanes[c.from_lane].index - index),
+                                         abs(self.lanes[c.to_lane].index - self.lanes[c.from_lane].index),
+                                         c.to_lane))
+
+    def route_path(self, route: tuple[str, ...] | list[str], start_lane: str | None = None,
+                   goal_lane: str | None = None) -> RoutePath:
+        """The lanes a car drives along ``route`` (see :class:`RoutePath`), starting in ``start_lane``
+        (default: the rightmost lane of route[0]): on each edge the lane it leaves the edge by (the
+        from-lane of the link ``route_link`` picks for the lane it entered by), the junction lanes
+        of that link, and on the last edge ``goal_lane`` (default: the lane the last link leads to)."""
+        route = tuple(route)
+        lane = start_lane or self.rightmost_lane(route[0])
+        if self.lane(lane).edge != route[0]:
+            raise ValueError(f"start lane {lane!r} is not on the route's first edge {route[0]!r}")
+        if goal_lane is not None and self.lane(goal_lane).edge != route[-1]:
+            raise ValueError(f"goal lane {goal_lane!r} is not on the route's last edge {route[-1]!r}")
+        lanes, edge_index, junction_index = [lane], [0], []
+        for edge, to_edge in zip(route[:-1], route[1:]):
+            link = self.route_link(edge, to_edge, lane)
+            lanes[-1] = link.from_lane
+            junction = self.link_lanes(link)
+            junction_index.append(range(len(lanes), len(lanes) + len(junction)))
+            lane = link.to_lane
+            lanes.extend(junction)
+            edge_index.append(len(lanes))
+            lanes.append(lane)
+        if goal_lane is not None:
+            lanes[-1] = goal_lane
+        offsets = np.concatenate([[0.0], np.cumsum([self.lane(ln).shape_length for ln in lanes])])
+        junctions = tuple(tuple(JunctionLane(lanes[i], self.lane(lanes[i]).shape, float(offsets[i])) for i in ids)
+                          for ids in junction_index)
+        edge_lanes = [self.lane(lanes[i]) for i in edge_index]
+        return RoutePath(route, tuple(lanes), offsets, offsets[edge_index], offsets[np.add(edge_index, 1)],
+                         np.array([ln.shape_length / ln.length if ln.length > 0 else 1.0 for ln in edge_lanes]),
+                         junctions)
+
+    def route_length(self, route: tuple[str, ...], start_pos: float, goal_pos: float,
+                     start_lane: str | None = None, goal_lane: str | None = None) -> float:
+        """Length [m] a car drives from ``start_pos`` on ``start_lane`` to ``goal_pos`` on ``goal_lane``
+        (SUMO lane positions [m] on route[0] and route[-1]; lanes as in :meth:`route_path`), along the
+        route's lanes and the junction lanes between them."""
+        return self.route_path(route, start_lane, goal_lane).length(start_pos, goal_pos)
+
+
+@dataclass(frozen=True)
+class JunctionLane:
+    """An internal lane of a :class:`RoutePath`: id, shape (N, 2) [m], ``start`` [m] = distance
+    from the start of the route's first lane to the start of this lane."""
+
+    id: str
+    shape: np.ndarray
+    start: float
+
+
+@dataclass(frozen=True)
+class RoutePath:
+    """The lanes a car drives along an edge route, junction (internal) lanes included.
+
+    Distances are along the lanes' drawn shapes [m] (``Lane.shape_length``: what a car drives, what
+    the world's odometer measures); SUMO lane positions are mapped onto them as SUMO does. E route
+    edges, L lanes.
+
+    Attributes:
+        route: (E,) edge ids.
+        lanes: (L,) lane ids in driving order: one lane of each route edge (the lane the car leaves
+            it by; on the last edge the goal lane) and, between two edges, the internal lanes of the
+            link joining them (``RoadNetwork.route_link``). Each lane leads into the next, or onto
+            its edge where the car changes lanes on that edge.
+        offsets: (L + 1,) [m] distance from the start of ``lanes[0]`` to the start of each lane;
+            ``offsets[-1]`` is the length of all of them.
+        edge_start / edge_end: (E,) [m] distance from the start of ``lanes[0]`` to the start / end
+            of each route edge's lane; junction k spans ``edge_end[k]`` .. ``edge_start[k + 1]``.
+        edge_scale: (E,) drawn length per SUMO lane position of each route edge's lane [m/m].
+        junctions: (E - 1,) the internal lanes between route[k] and route[k + 1] (may be none).
+    """
+
+    route: tuple[str, ...]
+    lanes: tuple[str, ...]
+    offsets: np.ndarray
+    edge_start: np.ndarray
+    edge_end: np.ndarray
+    edge_scale: np.ndarray
+    junctions: tuple[tuple[JunctionLane, ...], ...]
+
+    def position(self, edge_index: int, lane_pos: float) -> float:
+        """Distance [m] from the start of the route to SUMO lane position ``lane_pos`` [m] on any lane
+        of route[edge_index] (the lanes of an edge share one SUMO length)."""
+        return float(self.edge_start[edge_index] + lane_pos * self.edge_scale[edge_index])
+
+    def length(self, start_pos: float, goal_pos: float) -> float:
+        """Driven length [m] from SUMO lane position ``start_pos`` [m] on the first edge to
+        ``goal_pos`` [m] on the last."""
+        return self.position(len(self.route) - 1, goal_pos) - self.position(0, start_pos)
+
+    def junction_position(self, edge_index: int, point: np.ndarray) -> float:
+        """Distance [m] from the start of the route to a point (2,) [m] in the junction after
+        route[edge_index]: its projection on that junction's lanes, clipped to the junction."""
+        lo, hi = float(self.edge_end[edge_index]), float(self.edge_start[edge_index + 1])
+        best_m, at = np.inf, lo
+        for lane in self.junctions[edge_index]:
+            arc_m, off_m = project_on_polyline(lane.shape, point)
+            if off_m < best_m:
+                best_m, at = off_m, lane.start + arc_m
+        return float(np.clip(at, lo, hi))
+
+
+def project_on_polyline(shape: np.ndarray, point: np.ndarray) -> tuple[float, float]:
+    """(arc length [m] of the nearest point of a polyline (N, 2) to ``point`` (2,), distance [m] to it)."""
+    seg = np.diff(shape, axis=0)
+    seg_len2 = np.einsum("ij,ij->i", seg, seg)
+    t = np.clip(np.einsum("ij,ij->i", point - shape[:-1], seg) / np.maximum(seg_len2, 1e-12), 0.0, 1.0)
+    nearest = shape[:-1] + t[:, None] * seg
+    dist = np.hypot(*(nearest - point).T)
+    i = int(np.argmin(dist))
+    seg_len = np.sqrt(seg_len2)
+    return float(seg_len[:i].sum() + t[i] * seg_len[i]), float(dist[i])
 
 
 def point_along(shape: np.ndarray, pos: float) -> np.ndarray:
