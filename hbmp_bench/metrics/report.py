@@ -16,6 +16,9 @@ Views (``build_report``):
     driving        CARLA Leaderboard driving score and route completion (means over episodes, %),
                    per (set, town) and over all towns.
     km_between     km driven per infraction event, per set and kind (inf: no such event).
+    route_length   per (set, town, task) the distance driven ÷ route length of the episodes that
+                   reached the goal (median, min, max): about 1 when route lengths are what a
+                   car drives, since the goal is reached within a couple of metres.
     coverage       per set: episodes in the views, sim errors left out, agent errors.
 """
 
@@ -189,6 +192,26 @@ def km_between_infractions(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows).set_index("result_set")
 
 
+def route_length_check(df: pd.DataFrame) -> pd.DataFrame:
+    """Per (result_set, town, task): episodes that reached the goal and their distance driven ÷
+    route length (median, min, max). An agent that drives to the goal covers the route's length, so
+    the ratio checks the route lengths that timeouts and route completion rest on."""
+    df = scored(df)
+    goals = df[df["success"].astype(bool) & (df["route_length_m"] > 0)]
+    rows = []
+    for (result_set, town, task), group in goals.groupby(["result_set", "town", "task"], sort=False):
+        ratio = group["distance_m"] / group["route_length_m"]
+        rows.append({"result_set": result_set, "town": town, "task": task, "goal_episodes": len(group),
+                     "distance_over_route_median": round(float(ratio.median()), 3),
+                     "distance_over_route_min": round(float(ratio.min()), 3),
+                     "distance_over_route_max": round(float(ratio.max()), 3)})
+    if not rows:
+        return pd.DataFrame()
+    sets = _sets(df)
+    rows.sort(key=lambda r: (sets.index(r["result_set"]), r["town"], TASKS.index(r["task"])))
+    return pd.DataFrame(rows).set_index(["result_set", "town", "task"])
+
+
 def coverage(df: pd.DataFrame) -> pd.DataFrame:
     """Per result set: episodes counted, sim errors and decision-capped episodes left out, agent errors."""
     rows = []
@@ -224,6 +247,7 @@ def build_report(source: pd.DataFrame | Sequence[str | os.PathLike]) -> Report:
         "failures": failure_counts(df),
         "driving": driving_table(df),
         "km_between": km_between_infractions(df),
+        "route_length": route_length_check(df),
         "coverage": coverage(df),
     })
 
