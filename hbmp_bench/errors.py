@@ -11,8 +11,8 @@ class UserError(ValueError):
 
     ``hbmp-bench`` prints the message as one line and exits with code 2. It is raised at the
     boundaries where user input enters the package (options, files, ``module:Class`` plug-ins),
-    with the original exception as ``__cause__``, so Python callers keep the full traceback. A
-    ``ValueError``, like the errors of configuration validation.
+    with the original exception as ``__cause__``, so Python callers keep the full traceback. It is
+    a ``ValueError`` (bad input), as configuration validation raises.
     """
 
 
@@ -39,8 +39,8 @@ def raised_at(exc: BaseException) -> str:
 class UnknownNameError(UserError, KeyError):
     """A name (env id, town, task, suite, agent, map) that no registry knows.
 
-    The message lists the valid names so a typo is fixed in one look. It subclasses both
-    ``KeyError`` (a failed look-up) and ``ValueError`` (bad user input).
+    The message lists the valid names so a typo is fixed in one look. It is both a ``KeyError`` (a
+    failed look-up) and a ``UserError`` (bad user input, a ``ValueError``).
     """
 
     def __init__(self, kind: str, name: object, valid: Iterable[str]):

@@ -46,8 +46,9 @@ def load_agent(spec: str, **kwargs: Any) -> Agent:
     Raises:
         UnknownNameError: ``spec`` is none of these.
         UserError: the plug-in's module does not import, lacks the attribute, raises while it is
-            built, or builds no ``Agent``; or the checkpoint cannot be used. The plug-in's own
-            exception is the ``__cause__``.
+            built, or builds no ``Agent`` (the plug-in's own exception is the ``__cause__``); or
+            the checkpoint cannot be used (``CheckpointError``).
+        FileNotFoundError: no checkpoint file at ``spec``.
     """
     if spec in AGENTS:
         return AGENTS[spec](**kwargs)
