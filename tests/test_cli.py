@@ -159,6 +159,9 @@ def test_workers_0_creates_nothing(tmp_path, capsys):
     line = _one_line_error(capsys, ["evaluate", "--agent", "expert", "--workers", "0", "--out", str(out)])
     assert "workers must be >= 1" in line and "got 0" in line
     assert not out.exists()
+    line = _one_line_error(capsys, ["train", "il", "--workers", "0", "--out", str(out)])
+    assert "workers must be >= 1, got 0" in line
+    assert not out.exists()
 
 
 def test_unknown_density_is_one_line_before_any_worker_starts(tmp_path, capsys):
