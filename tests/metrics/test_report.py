@@ -68,8 +68,9 @@ def test_failure_counts_count_episodes_per_outcome(two_sets):
     counts = failure_counts(two_sets)
     a1 = counts.loc[("a", "Town01")]
     assert a1.to_dict() == {"episodes": 3, "success": 2, "wrong_lane": 1, "collision": 1, "red_light": 1,
-                            "timeout": 1, "agent_error": 0}
+                            "timeout": 1, "agent_error": 0, "sim_errors": 0}
     assert counts.loc[("a", "Town02"), "agent_error"] == 1 and counts.loc[("a", "Town02"), "episodes"] == 2
+    assert counts.loc[("a", "Town02"), "sim_errors"] == 1  # not scored, but shown
     assert list(counts.index) == [("a", "Town01"), ("a", "Town02"), ("b", "Town01"), ("b", "Town02")]
 
 
