@@ -188,7 +188,8 @@ class RoadNetwork:
         return sum(d in TURN_DIRECTIONS for d in self.turns(route))
 
     def shortest_tree(self, source: str) -> tuple[dict[str, float], dict[str, str]]:
-        """Dijkstra from the END of ``source`` over edge lengths [m].
+        """Dijkstra from the END of ``source`` over the length driven [m]: each step onto an edge
+        costs its junction lanes (the shortest link's) plus the edge's length.
 
         Returns (dist, prev): dist[e] is the length driven from the end of ``source`` to the
         end of ``e``; prev links each reached edge to its predecessor.
@@ -201,12 +202,21 @@ class RoadNetwork:
             if d > dist.get(e, np.inf):
                 continue
             for nxt in self.successors(e):
-                nd = d + self.edge_length[nxt]
+                nd = d + self.junction_length(e, nxt) + self.edge_length[nxt]
                 if nd < dist.get(nxt, np.inf):
                     dist[nxt] = nd
                     prev[nxt] = e
                     heapq.heappush(heap, (nd, nxt))
         return dist, prev
+
+    def junction_length(self, edge: str, to_edge: str) -> float:
+        """Length [m] of the shortest link's junction lanes from ``edge`` onto ``to_edge`` (0 if none)."""
+        return self._junction_lengths.get((edge, to_edge), 0.0)
+
+    @functools.cached_property
+    def _junction_lengths(self) -> dict[tuple[str, str], float]:
+        return {(e, nxt): min(sum(self.lane(ln).shape_length for ln in self.link_lanes(c)) for c in self.links(e, nxt))
+                for e in self.edge_length for nxt in self.successors(e) if self.links(e, nxt)}
 
     @staticmethod
     def path_to(prev: dict[str, str], source: str, target: str) -> tuple[str, ...]:
