@@ -90,10 +90,13 @@ def agent_account(user: str | None) -> pwd.struct_passwd | None:
     if user is None or os.geteuid() != 0:
         return None
     try:
-        return pwd.getpwnam(user)
+        account = pwd.getpwnam(user)
     except KeyError:
         raise ValueError(f"agent_user {user!r} does not exist on this machine: name an unprivileged user "
                          "(the agent process runs as it), or None to run agents as root") from None
+    if account.pw_uid == 0:
+        raise ValueError(f"agent_user {user!r} is root: name an unprivileged user, or None to run agents as root")
+    return account
 
 
 def enter_sandbox(limits: Any, keep_fds: Iterable[int]) -> str | None:
