@@ -363,7 +363,8 @@ class DrivingWorld:
 
     def _set_route(self, route: tuple[str, ...]) -> None:
         self.route = tuple(route)
-        self._route_path = self.net.route_path(self.route, self.episode.start_lane, self.episode.goal_lane)
+        self._route_path = self.net.route_path(self.route, self.episode.start_lane, self.episode.goal_lane,
+                                               self.episode.goal_pos)
         self._route_pos = {e: i for i, e in enumerate(self.route)}
 
     def _keep_route_reachable(self) -> None:
@@ -405,7 +406,8 @@ class DrivingWorld:
         ego, ep = self._ego, self.episode
         route_index = self._route_index()
         light = None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance, self._light.state)
-        road, scene = road_profile(self.net, ego.lane, ego.lane_pos, self.route, route_index, ep.goal_lane, ego.speed, light)
+        road, scene = road_profile(self.net, ego.lane, ego.lane_pos, self.route, route_index, ep.goal_lane, ego.speed, light,
+                                   ep.goal_pos)
         actors = self._actors
         occupancy = self.observer.occupancy(
             ego.xy, ego.yaw, self._followed_lane or ego.lane, self.route[route_index + 1: route_index + 4],

@@ -23,6 +23,12 @@ TURN_DIRECTIONS = frozenset("lLrR")
 """SUMO link directions that count as a turn (left, partly left, right, partly right)."""
 
 
+LANE_CHANGE_CUTOFF_M = 10.0
+"""No lane change starts within this distance of a lane's end [m]: the last metres before a
+junction (solid lines in real towns); a change begun there would enter the junction on another
+lane's connection."""
+
+
 @dataclass(frozen=True)
 class Connection:
     """One drivable link from a lane of an edge to a lane of the next edge.
@@ -247,6 +253,35 @@ class RoadNetwork:
         """Lanes of ``edge`` that have a link onto ``to_edge`` (the lanes that continue a route)."""
         return tuple(sorted({c.from_lane for c in self.links(edge, to_edge)}))
 
+    def route_lanes(self, route: tuple[str, ...], goal_lane: str, goal_pos: float | None = None,
+                    room_m: float = 20.0, cutoff_m: float = LANE_CHANGE_CUTOFF_M) -> tuple[frozenset[str], ...]:
+        """Per edge of ``route``, the lanes from which the car can drive on to ``goal_lane`` (on the
+        last edge: the goal lane itself).
+
+        A lane change needs ``room_m`` [m] of an edge: its length less the last ``cutoff_m`` [m]
+        before the junction where lane changes are closed, or on the goal edge the goal's position
+        ``goal_pos`` [m] (None: the goal edge's room like any edge's). Before an edge with that
+        room these are the lanes that link onto it at all; before an edge without (a short goal
+        edge, a roundabout's ring segment) the car must already be in a lane whose link lands on
+        one of that edge's good lanes. Where no lane does, any linking lane is kept.
+        """
+        return self._route_lanes(tuple(route), goal_lane, goal_pos, float(room_m), float(cutoff_m))
+
+    @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
+    def _route_lanes(self, route: tuple[str, ...], goal_lane: str, goal_pos: float | None, room_m: float,
+                     cutoff_m: float) -> tuple[frozenset[str], ...]:
+        good = [frozenset({goal_lane})]
+        for k in range(len(route) - 2, -1, -1):
+            edge, to_edge = route[k], route[k + 1]
+            last = k + 1 == len(route) - 1
+            room = goal_pos if last and goal_pos is not None else self.edge_length[to_edge] - cutoff_m
+            links = self.links(edge, to_edge)
+            lanes = frozenset(c.from_lane for c in links)
+            if room < room_m:
+                lanes = frozenset(c.from_lane for c in links if c.to_lane in good[-1]) or lanes
+            good.append(lanes)
+        return tuple(reversed(good))
+
     def neighbour_lane(self, lane_id: str, side: int) -> str | None:
         """The drivable lane ``side`` = +1 (left) or -1 (right) of ``lane_id``, else None."""
         lane = self.lanes.get(lane_id)
@@ -286,33 +321,37 @@ class RoadNetwork:
             lane = self.follow(lane, link.to_edge)
         return tuple(lanes)
 
-    def route_link(self, edge: str, to_edge: str, lane_id: str) -> Connection:
+    def route_link(self, edge: str, to_edge: str, lane_id: str, allowed: frozenset[str] | None = None) -> Connection:
         """The link from ``edge`` onto ``to_edge`` that a car in ``lane_id`` (a lane of ``edge``) takes:
         its own lane's link where it has one (the one that keeps the lane index, if several), else
-        the link of the nearest lane that has one (the car changes lanes on ``edge``)."""
+        the link of the nearest lane that has one (the car changes lanes on ``edge``). Only links
+        from the ``allowed`` lanes count, where any is (see :meth:`route_lanes`)."""
         links = self.links(edge, to_edge)
         if not links:
             raise ValueError(f"no link from {edge!r} to {to_edge!r} in {self.path.name}")
+        links = tuple(c for c in links if allowed is None or c.from_lane in allowed) or links
         index = self.lane(lane_id).index
         return min(links, key=lambda c: (abs(self.lanes[c.from_lane].index - index),
                                          abs(self.lanes[c.to_lane].index - self.lanes[c.from_lane].index),
                                          c.to_lane))
 
     def route_path(self, route: tuple[str, ...] | list[str], start_lane: str | None = None,
-                   goal_lane: str | None = None) -> RoutePath:
+                   goal_lane: str | None = None, goal_pos: float | None = None) -> RoutePath:
         """The lanes a car drives along ``route`` (see :class:`RoutePath`), starting in ``start_lane``
         (default: the rightmost lane of route[0]): on each edge the lane it leaves the edge by (the
-        from-lane of the link ``route_link`` picks for the lane it entered by), the junction lanes
-        of that link, and on the last edge ``goal_lane`` (default: the lane the last link leads to)."""
+        from-lane of the link ``route_link`` picks for the lane it entered by, among the lanes that
+        lead on to ``goal_lane`` at ``goal_pos`` [m]: :meth:`route_lanes`), the junction lanes of
+        that link, and on the last edge ``goal_lane`` (default: the lane the last link leads to)."""
         route = tuple(route)
         lane = start_lane or self.rightmost_lane(route[0])
         if self.lane(lane).edge != route[0]:
             raise ValueError(f"start lane {lane!r} is not on the route's first edge {route[0]!r}")
         if goal_lane is not None and self.lane(goal_lane).edge != route[-1]:
             raise ValueError(f"goal lane {goal_lane!r} is not on the route's last edge {route[-1]!r}")
+        good = self.route_lanes(route, goal_lane, goal_pos) if goal_lane is not None else (None,) * len(route)
         lanes, edge_index, junction_index = [lane], [0], []
-        for edge, to_edge in zip(route[:-1], route[1:]):
-            link = self.route_link(edge, to_edge, lane)
+        for k, (edge, to_edge) in enumerate(zip(route[:-1], route[1:])):
+            link = self.route_link(edge, to_edge, lane, good[k])
             lanes[-1] = link.from_lane
             junction = self.link_lanes(link)
             junction_index.append(range(len(lanes), len(lanes) + len(junction)))
@@ -335,7 +374,7 @@ class RoadNetwork:
         """Length [m] a car drives from ``start_pos`` on ``start_lane`` to ``goal_pos`` on ``goal_lane``
         (SUMO lane positions [m] on route[0] and route[-1]; lanes as in :meth:`route_path`), along the
         route's lanes and the junction lanes between them."""
-        return self.route_path(route, start_lane, goal_lane).length(start_pos, goal_pos)
+        return self.route_path(route, start_lane, goal_lane, goal_pos).length(start_pos, goal_pos)
 
 
 @dataclass(frozen=True)

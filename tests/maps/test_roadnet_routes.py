@@ -101,3 +101,23 @@ def test_routes_are_shortest_by_length_driven(town):
             ours = net.route_length(ep.route, 0.0, net.edge_length[ep.route[-1]])
             theirs = net.route_length(reference, 0.0, net.edge_length[reference[-1]])
             assert ours <= theirs * 1.005, (ep.key, ours, theirs)
+
+
+def test_route_lanes_reach_a_goal_lane_that_leaves_no_room_to_change():
+    """Town03's roundabout: ring segments of 12.5-16 m leave no room for a lane change, so from the
+    ring's entry on only the lanes whose links land on the goal lane lead to it; before a long
+    edge every linking lane does."""
+    net = road_network("Town03")
+    route = ("-AW_X90_235", "-I90_130_AW", "-X90_95_I90_130")
+    goal = "-X90_95_I90_130_1"
+    good = net.route_lanes(route, goal, goal_pos=8.57)
+    assert good[-1] == {goal}
+    assert good[1] == {"-I90_130_AW_1"} and good[0] == {"-AW_X90_235_1"}
+    assert len(net.lanes_to(route[0], route[1])) == 2  # both lanes link on: the rule, not the map, narrows them
+    # a goal far enough along a long goal edge leaves room to change lanes there
+    route = ("-X230_235_Pr235", "-I195_235_X230_235", "-AN_I195_235", "-X90_235_AN", "-I45_235_X90_235")
+    assert net.route_lanes(route, "-I45_235_X90_235_1", goal_pos=25.0)[3] == set(net.lanes_to(route[3], route[4]))
+    assert net.route_lanes(route, "-I45_235_X90_235_1", goal_pos=10.85)[3] == {"-X90_235_AN_1"}
+    # the lanes a car drives (and so the route length) follow the same rule
+    path = net.route_path(route, "-X230_235_Pr235_2", "-I45_235_X90_235_1", 10.85)
+    assert "-X90_235_AN_1" in path.lanes and "-X90_235_AN_2" not in path.lanes
