@@ -9,6 +9,9 @@ leaderboard folder (one that runs as ``nobody`` cannot, see ``sandbox``). So the
 - notes the leaderboard folder's results files before a submission runs (``BoardSnapshot``) and
   refuses to write its entry when one was added, changed or removed meanwhile.
 
+A file found changed is moved aside to ``<name>.tampered`` (never deleted), so neither
+``hbmp-bench report``, a resumed evaluation nor the leaderboard picks up what it holds.
+
 It cannot vouch for records written before the run began (a resumed file): those are as
 trustworthy as the runs that wrote them.
 """
@@ -30,6 +33,16 @@ def _digest(data: bytes) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
+def quarantine(path: Path) -> Path | None:
+    """Move ``path`` aside to ``<name>.tampered`` (replacing an older one); None when it is gone."""
+    target = path.with_name(path.name + ".tampered")
+    try:
+        os.replace(path, target)
+    except FileNotFoundError:
+        return None
+    return target
+
+
 class RecordsLedger:
     """The records file at ``path`` as this evaluator last left it (size and sha256 of its bytes).
 
@@ -47,10 +60,12 @@ class RecordsLedger:
         return self.path.read_bytes() if self.path.exists() else b""
 
     def _tampered(self, when: str) -> TamperedError:
+        moved = quarantine(self.path)
         return TamperedError(
             f"{self.path} changed while the evaluation ran ({when}): something other than the evaluator wrote to it "
-            f"— an agent under evaluation can, when it runs as your user. Its records cannot be trusted: delete it "
-            f"and evaluate again as root (the agent then runs as an unprivileged user) or in a container.")
+            f"— an agent under evaluation can, when it runs as your user. Its records cannot be trusted"
+            f"{f' and were moved to {moved.name}' if moved else ''}: evaluate again as root (the agent then runs as "
+            f"an unprivileged user) or in a container.")
 
     def verified(self) -> bytes:
         """The file's bytes, checked to be exactly those this evaluator left; else ``TamperedError``."""
@@ -92,8 +107,10 @@ class BoardSnapshot:
         now = self._scan()
         changed = sorted(set(now) ^ set(self.files) | {n for n in set(now) & set(self.files) if now[n] != self.files[n]})
         if changed:
+            moved = [p.name for n in changed if n in now and (p := quarantine(self.folder / n)) is not None]
             raise TamperedError(
                 f"leaderboard folder {self.folder} changed while the submission ran ({', '.join(changed)}): "
                 f"results files were added, changed or removed by something other than this submission — an agent "
                 f"under evaluation can, when it runs as your user (or another submission ran at the same time). "
-                f"Nothing was written; check those files, then submit again (finished episodes are kept).")
+                f"Nothing was written{'; moved aside: ' + ', '.join(moved) if moved else ''}. Check those files "
+                f"(rename one back if it was yours), then submit again (finished episodes are kept).")
