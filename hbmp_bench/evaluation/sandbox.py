@@ -4,7 +4,9 @@ An agent under evaluation is untrusted code. Before its process imports or build
 (``enter_sandbox``), it
 
 1. starts its own session and process group (``os.setsid``), so that the pool ends it together
-   with every process it forked (``kill_session``, after every episode);
+   with every process it forked (``kill_session``, after every episode); a child that left the
+   session is an orphan of the fork server by then (``adopt_orphans``), which the pool kills too
+   (``reap_orphans``);
 2. closes every file descriptor it inherited except its channel and its lifeline (stdin stays
    ``/dev/null``; stdout becomes a copy of stderr, so the evaluator's own output — a ``--json``
    summary — cannot be forged);
@@ -29,9 +31,10 @@ What this does not promise: it is not a container or a VM. Running as your own u
 not root), the agent can still read and write whatever your user can — the records and
 leaderboard files included (the evaluator detects that, see ``integrity``), your home folder and
 the installed package — can signal your processes (killing the env process makes a visible
-``sim_error``), and can reach the network. A process it forks that starts a session of its own
-escapes the group kill. For untrusted agents, run the evaluator as root (the agent then runs as
-``nobody``) or inside a container.
+``sim_error``), and can reach the network. With the ``spawn`` start method there is no fork
+server to adopt orphans, so a child that starts a session of its own escapes the kill. For
+untrusted agents, run the evaluator as root (the agent then runs as ``nobody``) or inside a
+container.
 """
 
 from __future__ import annotations
