@@ -125,7 +125,7 @@ def exit_note(code: int | None, limits: RunnerLimits) -> str:
     cause = {
         "SIGXCPU": f": it used up its CPU time limit of {limits.agent_cpu_s} s",
         "SIGXFSZ": f": it wrote past its file size limit of {limits.agent_file_mb} MiB",
-        "SIGKILL": " (out of memory, or killed by another process)",
+        "SIGKILL": " (out of memory, past its CPU time limit, or killed by another process)",
     }.get(name, "")
     return f"agent process killed by {name}{cause}"
 

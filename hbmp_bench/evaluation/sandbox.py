@@ -11,7 +11,8 @@ An agent under evaluation is untrusted code. Before its process imports or build
    ``/dev/null``; stdout becomes a copy of stderr, so the evaluator's own output — a ``--json``
    summary — cannot be forged);
 3. cannot gain privileges through ``exec`` of a set-user-id program (``PR_SET_NO_NEW_PRIVS``);
-4. gets resource limits with soft = hard, which it cannot raise: address space (``RLIMIT_AS``),
+4. gets resource limits it cannot raise (soft = hard, but for CPU time, where the hard limit
+   lies 1 s past the soft one, so that the agent first gets SIGXCPU): address space (``RLIMIT_AS``),
    CPU time (``RLIMIT_CPU``), largest file written (``RLIMIT_FSIZE``), no core files, and, under
    its own user, a cap on that user's processes and threads (``RLIMIT_NPROC``);
 5. when the evaluator runs as root, switches for good to an unprivileged user
@@ -126,8 +127,8 @@ def enter_sandbox(limits: Any, keep_fds: Iterable[int]) -> str | None:
     _set_limit(resource.RLIMIT_CORE, 0)
     if limits.agent_memory_mb is not None:
         _set_limit(resource.RLIMIT_AS, limits.agent_memory_mb * _MIB)
-    if limits.agent_cpu_s is not None:
-        _set_limit(resource.RLIMIT_CPU, limits.agent_cpu_s)
+    if limits.agent_cpu_s is not None:  # SIGXCPU at the limit (says why it ended), SIGKILL a second later
+        _set_limit(resource.RLIMIT_CPU, limits.agent_cpu_s, limits.agent_cpu_s + 1)
     if limits.agent_file_mb is not None:
         _set_limit(resource.RLIMIT_FSIZE, limits.agent_file_mb * _MIB)
     if account is not None:
@@ -139,13 +140,15 @@ def enter_sandbox(limits: Any, keep_fds: Iterable[int]) -> str | None:
     return None
 
 
-def _set_limit(kind: int, value: int) -> None:
-    """Set soft = hard = ``value`` (never above an existing hard limit)."""
-    _, hard = resource.getrlimit(kind)
-    if hard != resource.RLIM_INFINITY:
-        value = min(value, hard)
+def _set_limit(kind: int, value: int, hard: int | None = None) -> None:
+    """Set the soft limit to ``value`` and the hard one to ``hard`` (default ``value``), never
+    above an existing hard limit."""
+    hard = value if hard is None else hard
+    _, current = resource.getrlimit(kind)
+    if current != resource.RLIM_INFINITY:
+        value, hard = min(value, current), min(hard, current)
     try:
-        resource.setrlimit(kind, (value, value))
+        resource.setrlimit(kind, (value, hard))
     except (ValueError, OSError) as exc:
         raise SandboxError(f"cannot set resource limit {kind} to {value}: {exc}") from None
 

@@ -350,6 +350,14 @@ class MemoryHogAgent(_Base):
                                      "limit": resource.getrlimit(resource.RLIMIT_AS)[1]})
 
 
+class CpuHogAgent(_Base):
+    """Spins on the CPU without end (threads or not, the process's CPU time is what counts)."""
+
+    def attack(self):
+        while True:
+            pass
+
+
 class RecordsForgerAgent(_Base):
     """Appends a forged goal record for its own episode to the records file (``HBMP_TEST_RECORDS``)
     and drops a forged, complete, top-ranked results file into the leaderboard folder

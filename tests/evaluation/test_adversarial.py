@@ -88,7 +88,7 @@ def test_the_agent_process_is_confined(agent_dir):
     assert facts["no_new_privs"] == 1 and facts["stdout_is_stderr"]
     mib = 2**20
     assert facts["rlimits"]["RLIMIT_AS"] == [QUICK.agent_memory_mb * mib] * 2
-    assert facts["rlimits"]["RLIMIT_CPU"] == [QUICK.agent_cpu_s] * 2
+    assert facts["rlimits"]["RLIMIT_CPU"] == [QUICK.agent_cpu_s, QUICK.agent_cpu_s + 1]
     assert facts["rlimits"]["RLIMIT_FSIZE"] == [QUICK.agent_file_mb * mib] * 2
     assert facts["rlimits"]["RLIMIT_CORE"] == [0, 0]
     extra = {fd: target for fd, target in facts["fds"].items() if int(fd) > 2}
@@ -155,6 +155,14 @@ def test_memory_is_capped(agent_dir):
     assert hog["limit"] == 2560 * 2**20
     assert hog["error"].startswith("MemoryError") and hog["allocated"] < 2560 * 2**20
     assert records["MemoryHogAgent"].end_reason == DECISION_CAP  # refused memory, then harmless
+
+
+def test_cpu_time_is_capped():
+    limits = RunnerLimits(decision_timeout_s=20.0, max_decisions=4, agent_cpu_s=1)
+    start = time.monotonic()
+    records = run(["CpuHogAgent"], limits)
+    assert_counted_failure(records["CpuHogAgent"], "agent process killed by SIGXCPU: it used up its CPU time limit of 1 s")
+    assert time.monotonic() - start < 15.0
 
 
 def test_garbage_after_driving_is_a_counted_failure_not_an_erased_episode(tmp_path):
