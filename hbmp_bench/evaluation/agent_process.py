@@ -6,7 +6,9 @@ the ego or read other vehicles. The pool starts one agent process per episode.
 
 Before any agent code runs (importing its module included) the process enters the sandbox
 (``sandbox.enter_sandbox``: own session, no inherited descriptors, resource limits, and an
-unprivileged user when the evaluator is root).
+unprivileged user when the evaluator is root). Agents built by the package's own code alone
+(registered agents, checkpoint files) are built just before the user switch, so a checkpoint
+only the caller can read still loads; a ``module:Class`` agent is imported after it.
 
 Protocol (frames on one socket to the env process, see ``channel``):
     agent → env  ready (with the agent's ``AgentDescription``) once built, or an error and exit;
@@ -23,6 +25,7 @@ import operator
 import socket
 import traceback
 from multiprocessing.connection import Connection
+from typing import Any
 
 import numpy as np
 
@@ -56,36 +59,62 @@ def as_action(value: object) -> int | tuple[float, ...]:
     raise TypeError(f"action must be an integer or a 1-D vector of numbers, got {type(value).__name__} {value!r:.80}")
 
 
+def runs_only_package_code(spec: str) -> bool:
+    """Whether building ``spec`` runs only this package's code: a registered agent (the fork
+    server imported the package's agents only) or a checkpoint file (read as data, with
+    ``torch.load(weights_only=True)``). A ``module:Class`` agent runs its own code."""
+    from hbmp_bench.agents import AGENTS
+
+    return spec in AGENTS or spec.endswith(".pt")
+
+
+def _build(spec: str, hint: str = "") -> tuple[Any, str]:
+    """(the agent, "") or (None, why it could not be built)."""
+    try:
+        from hbmp_bench.agents import load_agent
+
+        agent = load_agent(spec)
+        channel.AgentDescription.of(agent)
+        return agent, ""
+    except UserError as exc:  # already one line naming the agent and where it failed
+        return None, f"agent could not be built: {exc}{hint}"
+    except BaseException:  # noqa: BLE001 - every failure is reported to the env process
+        return None, _error_text(f"{spec!r} could not be built: load_agent") + hint
+
+
 def agent_main(sock: socket.socket, spec: str, lifeline: Connection, limits, environ: dict[str, str] | None = None) -> None:
     """Entry point of the agent process (started by the episode pool with the caller's ``environ``;
-    it exits when ``lifeline`` closes)."""
+    it exits when ``lifeline`` closes).
+
+    An agent whose build runs only the package's code (``runs_only_package_code``) is built
+    inside the sandbox but before the switch to ``agent_user``, so it may read a checkpoint only
+    the caller can read; any other is built after the switch, so none of its code runs as root.
+    """
     from hbmp_bench.evaluation.sandbox import SandboxError, enter_sandbox
     from hbmp_bench.evaluation.tasks import adopt_environment, watch_lifeline
 
     watch_lifeline(lifeline)
     adopt_environment(environ)
     end = channel.AgentEnd(sock)
+    built: list[tuple[Any, str]] = []
+    early = runs_only_package_code(spec)
     try:
-        user = enter_sandbox(limits, keep_fds=(sock.fileno(), lifeline.fileno()))
+        user = enter_sandbox(limits, keep_fds=(sock.fileno(), lifeline.fileno()),
+                             before_switch=(lambda: built.append(_build(spec))) if early else None)
     except SandboxError as exc:
         end.reply(channel.encode_error(f"the evaluator could not confine the agent process: {exc}"))
         return
-    hint = "" if user is None else (
-        f" (the agent process runs as user {user!r} because the evaluator runs as root: the agent's module and "
-        "files must be readable by that user; only a trusted agent may run as root, with agent_user=None)")
-    try:
-        from hbmp_bench.agents import load_agent
-
-        agent = load_agent(spec)
-        description = channel.AgentDescription.of(agent)
-    except UserError as exc:  # already one line naming the agent and where it failed
-        end.reply(channel.encode_error(f"agent could not be built: {exc}{hint}"))
+    if not built:
+        hint = "" if user is None else (
+            f" (the agent process runs as user {user!r} because the evaluator runs as root: the agent's module and "
+            "files must be readable by that user; only a trusted agent may run as root, with agent_user=None)")
+        built.append(_build(spec, hint))
+    agent, error = built[0]
+    if agent is None:
+        end.reply(channel.encode_error(error))
         end.close()
         return
-    except BaseException:  # noqa: BLE001 - every failure is reported to the env process
-        end.reply(channel.encode_error(_error_text(f"{spec!r} could not be built: load_agent") + hint))
-        end.close()
-        return
+    description = channel.AgentDescription.of(agent)
     end.reply(channel.encode_ready(description))
     while True:
         try:

@@ -19,10 +19,11 @@ An agent under evaluation is untrusted code. Before its process imports or build
    (``RunnerLimits.agent_user``, default ``nobody``): it can then neither write the caller's
    files (records, leaderboard) nor signal, trace or read the memory of the evaluator's processes.
    It switches *before* loading the agent, so no agent code ever runs as root; ``HOME`` becomes
-   the user's (as with ``su``). Directories on
+   the user's (as with ``su``). (An agent whose build runs only the package's code — a registered
+   agent, a checkpoint file read as data — is built just before the switch.) Directories on
    ``sys.path`` that the user cannot reach (a Python installed under ``/root``) are opened while
-   still root and imported from through ``/proc/self/fd``; the agent's own files (its module,
-   checkpoint) must be readable by that user.
+   still root and imported from through ``/proc/self/fd``; a ``module:Class`` agent's own files
+   must be readable by that user.
 
 The env process, the pool's process and the fork server make themselves non-dumpable
 (``protect_process``): a process of the same user can then neither trace them nor read or write
@@ -48,7 +49,7 @@ import signal
 import stat
 import sys
 import time
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 PR_SET_DUMPABLE = 4
@@ -103,13 +104,16 @@ def agent_account(user: str | None) -> pwd.struct_passwd | None:
     return account
 
 
-def enter_sandbox(limits: Any, keep_fds: Iterable[int]) -> str | None:
+def enter_sandbox(limits: Any, keep_fds: Iterable[int], before_switch: Callable[[], None] | None = None) -> str | None:
     """Confine this (agent) process as the module docstring says, before any agent code runs.
 
     Args:
         limits: the ``RunnerLimits`` (``agent_memory_mb``, ``agent_cpu_s``, ``agent_file_mb``,
             ``agent_processes``, ``agent_user``).
         keep_fds: descriptors to keep open besides 0, 1 and 2 (the channel, the lifeline).
+        before_switch: called once confined but before the user switch (building an agent whose
+            build runs only the package's code, from files only the caller can read); called
+            whether or not the user is switched.
 
     Returns the user the process switched to (None: it kept the caller's). Raises
     ``SandboxError`` when a step that was asked for fails.
@@ -131,6 +135,8 @@ def enter_sandbox(limits: Any, keep_fds: Iterable[int]) -> str | None:
         _set_limit(resource.RLIMIT_CPU, limits.agent_cpu_s, limits.agent_cpu_s + 1)
     if limits.agent_file_mb is not None:
         _set_limit(resource.RLIMIT_FSIZE, limits.agent_file_mb * _MIB)
+    if before_switch is not None:
+        before_switch()
     if account is not None:
         if limits.agent_processes is not None:
             _set_limit(resource.RLIMIT_NPROC, limits.agent_processes)

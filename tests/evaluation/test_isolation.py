@@ -1,6 +1,7 @@
 """The agent runs in its own process: failures are recorded per episode, the run goes on, and the
 agent cannot reach the simulation."""
 
+import shutil
 from pathlib import Path
 
 import pytest
@@ -67,3 +68,19 @@ def test_an_agent_importing_the_simulator_cannot_move_the_ego(tmp_path, monkeypa
     assert attempt.startswith("failed:")
     assert not record.success and record.end_reason == "timeout"
     assert record.route_completion < 0.05 and record.distance_m < 1.0
+
+
+def test_a_checkpoint_only_the_caller_can_read_still_loads(tmp_path):
+    """Checkpoints are built by the package's own code before the agent process switches user
+    (run as root: to nobody), so a private checkpoint file works; a copy of the shipped hbmp."""
+    from hbmp_bench.agents.learned import shipped_checkpoint
+
+    private = tmp_path / "private" / "hbmp.pt"
+    private.parent.mkdir(mode=0o700)
+    shutil.copy(shipped_checkpoint("hbmp"), private)
+    private.chmod(0o600)
+    tasks = suite_tasks("corl2017", str(private), towns=["Town01"], tasks=["Straight"], episodes=1, fidelity="event")
+    with EpisodePool(1, RunnerLimits(max_decisions=3)) as pool:
+        (outcome,) = list(pool.imap(tasks))
+    assert outcome.record.end_reason == "decision_cap" and outcome.record.error == ""
+    assert outcome.record.decisions == 3
