@@ -240,6 +240,10 @@ def with_agent_env(limits: RunnerLimits, agent: AgentDescription) -> RunnerLimit
     unknown = sorted(k for k, _ in agent.env_kwargs if k not in OBSERVATION_OPTIONS)
     if unknown:
         raise ValueError(f"the agent asks for env options {unknown}; an agent may only set {list(OBSERVATION_OPTIONS)}")
+    from hbmp_bench.envs.observation import ObservationConfig
+
+    if "observation" in dict(agent.env_kwargs):  # checked here: not a sim_error in every episode
+        ObservationConfig(kind=dict(agent.env_kwargs)["observation"])
     factory = limits.env_factory or agent.env_factory
     kwargs = {**dict(agent.env_kwargs), **dict(limits.env_kwargs)}
     return dataclasses.replace(limits, env_factory=factory, env_kwargs=tuple(kwargs.items()))

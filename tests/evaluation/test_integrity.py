@@ -105,6 +105,8 @@ def test_an_agent_may_only_ask_for_known_envs_and_observation_options():
         with_agent_env(limits, AgentDescription("hostile_agents:make_env"))
     with pytest.raises(ValueError, match=r"env options \['density'\]"):
         with_agent_env(limits, AgentDescription(None, (("density", "empty"),)))
+    with pytest.raises(ValueError, match="observation kind"):
+        with_agent_env(limits, AgentDescription(None, (("observation", "birds_eye"),)))
     trusted = with_agent_env(RunnerLimits(env_factory="tiny_suite:make_env"), AgentDescription())
     assert trusted.env_factory == "tiny_suite:make_env"  # the evaluator may name any env
 
