@@ -12,8 +12,8 @@ only the caller can read still loads; a ``module:Class`` agent is imported after
 
 Protocol (frames on one socket to the env process, see ``channel``):
     agent → env  ready (with the agent's ``AgentDescription``) once built, or an error and exit;
-    env → agent  ``("reset", info)`` → ok;
-    env → agent  ``("act", observation, info)`` → an action (int, or vector of floats);
+    env → agent  ``("reset", n, info)`` → ok for request n;
+    env → agent  ``("act", n, observation, info)`` → an action (int, or vector of floats) for request n;
     any exception in the agent → an error text (the process keeps serving).
 Requests are pickled by the (trusted) env process; replies are data only. The process exits
 when the channel closes.
@@ -121,21 +121,21 @@ def agent_main(sock: socket.socket, spec: str, lifeline: Connection, limits, env
             message = end.receive()
         except (channel.ChannelClosed, OSError):
             return
-        kind = message[0]
+        kind, number, payload = message[0], message[1], message[2:]
         try:
             if kind == "reset":
-                agent.reset(message[1])
-                reply = channel.encode_ok()
+                agent.reset(*payload)
+                reply = channel.encode_ok(number)
             elif kind == "act":
-                raw = agent.act(message[1], message[2])
+                raw = agent.act(*payload)
                 try:
-                    reply = channel.encode_action(as_action(raw))
+                    reply = channel.encode_action(as_action(raw), number)
                 except (TypeError, ValueError) as exc:
-                    reply = channel.encode_error(f"invalid action: {exc}")
+                    reply = channel.encode_error(f"invalid action: {exc}", number)
             else:
-                reply = channel.encode_error(f"unknown request {kind!r}")
+                reply = channel.encode_error(f"unknown request {kind!r}", number)
         except Exception:  # noqa: BLE001
-            reply = channel.encode_error(_error_text(f"{kind}()"))
+            reply = channel.encode_error(_error_text(f"{kind}()"), number)
         try:
             end.reply(reply)
         except OSError:

@@ -3,12 +3,14 @@
 The two processes share a connected Unix stream socket. Every message is one *frame*: a 4-byte
 big-endian length, then that many bytes.
 
-env → agent (requests): pickled tuples ``("reset", info)`` and ``("act", observation, info)``.
-    Pickle is safe in this direction only: the env process is trusted, and the agent process
-    unpickling what the env sends can harm nothing but the agent.
+env → agent (requests): pickled tuples ``("reset", n, info)`` and ``("act", n, observation, info)``,
+    ``n`` counting the channel's requests from 1. Pickle is safe in this direction only: the env
+    process is trusted, and the agent process unpickling what the env sends can harm nothing but
+    the agent.
 
-agent → env (replies): never pickle. The env process decodes a reply with ``struct`` and
-    ``numpy.frombuffer`` and a length-capped UTF-8 decode, none of which can run code:
+agent → env (replies): never pickle. A reply is a tag byte, the number ``n`` of the request it
+    answers (little-endian uint32; 0 for ready), and a body. The env process decodes it with
+    ``struct`` and ``numpy.frombuffer`` and a length-capped UTF-8 decode, none of which can run code:
 
     ========  ==========================================  =====================================
     tag       body                                        meaning
@@ -22,8 +24,9 @@ agent → env (replies): never pickle. The env process decodes a reply with ``st
     ========  ==========================================  =====================================
 
     Anything else (an unknown tag, a wrong body length, a frame over ``MAX_REPLY_BYTES``, a
-    second reply to one request, invalid UTF-8 or JSON, a JSON document off the schema) is a
-    ``ProtocolError``: the agent's error.
+    reply to another request than the pending one, data sent while no request is pending,
+    invalid UTF-8 or JSON, a JSON document off the schema) is a ``ProtocolError``: the agent's
+    error. So each request gets exactly one reply, and a flood or replay of replies fails.
 
 The env side reads and writes with deadlines (``EnvEnd``): an agent that stops reading its
 requests, sends half a frame and stalls, or never answers cannot block the env process, which
@@ -48,7 +51,7 @@ MAX_TEXT_BYTES = 16 * 1024
 """Longest text body (ready description, error message) of a reply [bytes]."""
 MAX_VECTOR = 64
 """Most floats in a continuous action."""
-MAX_REPLY_BYTES = 1 + max(MAX_TEXT_BYTES, 8 * MAX_VECTOR)
+MAX_REPLY_BYTES = 5 + max(MAX_TEXT_BYTES, 8 * MAX_VECTOR)
 """Longest reply frame the env process accepts [bytes]; a longer one is the agent's error."""
 MAX_DESCRIPTION_ITEMS = 16
 """Most ``env_kwargs`` entries in a ready description."""
@@ -57,6 +60,7 @@ MAX_NAME_CHARS = 200
 
 _HEADER = struct.Struct("!I")
 _INT = struct.Struct("<q")
+_REQUEST = struct.Struct("<I")
 
 READY, ERROR, OK, ACTION = "ready", "error", "ok", "action"
 """Kinds of a decoded reply."""
@@ -144,48 +148,61 @@ def text_body(text: str) -> bytes:
     return data
 
 
+def _reply(tag: bytes, request: int, body: bytes = b"") -> bytes:
+    return tag + _REQUEST.pack(request) + body
+
+
 def encode_ready(description: AgentDescription) -> bytes:
-    return b"R" + text_body(description.to_json())
+    return _reply(b"R", 0, text_body(description.to_json()))
 
 
-def encode_error(text: str) -> bytes:
-    return b"E" + text_body(text)
+def encode_error(text: str, request: int = 0) -> bytes:
+    return _reply(b"E", request, text_body(text))
 
 
-def encode_ok() -> bytes:
-    return b"K"
+def encode_ok(request: int) -> bytes:
+    return _reply(b"K", request)
 
 
-def encode_action(action: int | tuple[float, ...]) -> bytes:
-    """An action from ``agent_process.as_action`` as a reply; raises ValueError when it cannot be
-    sent (an integer outside int64, more than ``MAX_VECTOR`` floats)."""
+def encode_action(action: int | tuple[float, ...], request: int) -> bytes:
+    """An action from ``agent_process.as_action`` as the reply to request ``request``; raises
+    ValueError when it cannot be sent (an integer outside int64, more than ``MAX_VECTOR`` floats)."""
     if isinstance(action, int):
         try:
-            return b"A" + _INT.pack(action)
+            return _reply(b"A", request, _INT.pack(action))
         except struct.error:
             raise ValueError(f"integer action {action} does not fit in 64 bits") from None
     if not 0 < len(action) <= MAX_VECTOR:
         raise ValueError(f"a vector action has 1 to {MAX_VECTOR} entries, got {len(action)}")
-    return b"V" + np.asarray(action, dtype="<f8").tobytes()
+    return _reply(b"V", request, np.asarray(action, dtype="<f8").tobytes())
 
 
 @dataclass(frozen=True)
 class Reply:
     """A decoded reply: ``kind`` one of ``READY``, ``ERROR``, ``OK``, ``ACTION``; ``value`` an
-    ``AgentDescription``, the error text, None, or the action (int, or tuple of floats)."""
+    ``AgentDescription``, the error text, None, or the action (int, or tuple of floats);
+    ``request`` the number of the request it answers (0: none)."""
 
     kind: str
     value: Any = None
+    request: int = 0
 
 
 def decode_reply(frame: bytes) -> Reply:
     """Decode one reply frame; raises ``ProtocolError`` for anything that is not one of the
     formats in the module docstring. Runs no code from the frame."""
-    if not frame:
-        raise ProtocolError("empty reply")
+    if len(frame) < 1 + _REQUEST.size:
+        raise ProtocolError(f"reply of {len(frame)} bytes, too short for a tag and a request number")
     if len(frame) > MAX_REPLY_BYTES:
         raise ProtocolError(f"reply of {len(frame)} bytes, the limit is {MAX_REPLY_BYTES}")
-    tag, body = frame[:1], frame[1:]
+    tag, (request,), body = frame[:1], _REQUEST.unpack(frame[1:5]), frame[5:]
+    if tag not in (b"R", b"E", b"K", b"A", b"V"):
+        raise ProtocolError(f"unknown reply tag {tag!r} ({len(frame)} bytes)")
+    reply = _decode_body(tag, body)
+    return Reply(reply.kind, reply.value, request)
+
+
+def _decode_body(tag: bytes, body: bytes) -> Reply:
     if tag in (b"R", b"E"):
         try:
             text = body.decode("utf-8")
@@ -212,7 +229,7 @@ def decode_reply(frame: bytes) -> Reply:
         if not all(math.isfinite(x) for x in values):
             raise ProtocolError("vector action with a NaN or infinite entry")
         return Reply(ACTION, values)
-    raise ProtocolError(f"unknown reply tag {tag!r} ({len(frame)} bytes)")
+    raise AssertionError(tag)
 
 
 # ---------------------------------------------------------------------------------------------- frames
@@ -266,13 +283,15 @@ class EnvEnd:
         self.sock = sock
         self.on_wait = on_wait
         self.wait_step_s = wait_step_s
+        self.requests = 0
 
     def request(self, message: tuple, timeout_s: float) -> None:
-        """Send a pickled request; raises ``ChannelTimeout`` when the agent does not take it in
-        ``timeout_s`` [s], ``ChannelClosed`` when its end is gone, ``ProtocolError`` when the agent
-        sent something nobody asked for."""
+        """Send request ``(kind, *payload)`` pickled as ``(kind, n, *payload)``; raises
+        ``ChannelTimeout`` when the agent does not take it in ``timeout_s`` [s], ``ChannelClosed``
+        when its end is gone, ``ProtocolError`` when the agent sent something nobody asked for."""
         self._no_unsolicited_data()
-        data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+        self.requests += 1
+        data = pickle.dumps((message[0], self.requests, *message[1:]), protocol=pickle.HIGHEST_PROTOCOL)
         frame = memoryview(_HEADER.pack(len(data)) + data)
         deadline = time.monotonic() + timeout_s
         sent = 0
@@ -286,13 +305,16 @@ class EnvEnd:
                 raise ChannelClosed(f"the agent's end is closed ({type(exc).__name__})") from None
 
     def reply(self, timeout_s: float) -> Reply:
-        """The agent's next reply, decoded; raises ``ChannelTimeout``, ``ChannelClosed`` or
-        ``ProtocolError`` (oversized, malformed, or followed by more data)."""
+        """The agent's reply to the pending request (the ready reply before any), decoded; raises
+        ``ChannelTimeout``, ``ChannelClosed`` or ``ProtocolError`` (oversized, malformed, for
+        another request, or followed by more data)."""
         deadline = time.monotonic() + timeout_s
         (length,) = _HEADER.unpack(self._exactly(_HEADER.size, deadline))
         if length > MAX_REPLY_BYTES:
             raise ProtocolError(f"reply of {length} bytes announced, the limit is {MAX_REPLY_BYTES}")
         reply = decode_reply(self._exactly(length, deadline))
+        if reply.request != self.requests:
+            raise ProtocolError(f"reply to request {reply.request}, but the pending request is {self.requests}")
         self._no_unsolicited_data()
         return reply
 

@@ -43,10 +43,26 @@ POLL_S = 0.2
 """How often the pool checks watchdogs while no message arrives [s]."""
 
 PRELOAD = ("hbmp_bench.evaluation.forkserver_guard", "hbmp_bench.evaluation.env_process",
-           "hbmp_bench.evaluation.agent_process", "hbmp_bench.envs.behavior_env", "hbmp_bench.agents", "torch")
-"""Modules the fork server imports once, so a slot (re)starts, and an agent process (with torch
-for learned agents) starts, in a fraction of a second. ``forkserver_guard`` makes the fork
-server non-dumpable. Only trusted modules: never the agent's."""
+           "hbmp_bench.evaluation.agent_process", "hbmp_bench.envs.behavior_env", "hbmp_bench.agents")
+"""Modules the fork server imports once, so a slot (re)starts in a fraction of a second.
+``forkserver_guard`` makes the fork server non-dumpable. Only trusted modules: never the agent's."""
+LEARNED_PRELOAD = ("torch", "tensordict", "hbmp_bench.training.checkpoints")
+"""Added to ``PRELOAD`` for learned agents (registered ones and ``.pt`` checkpoints), so the agent
+process each episode starts does not import torch again (seconds); ``torch`` alone for
+``module:Class`` agents."""
+
+
+def preload_for(agent: str | None, limits: RunnerLimits) -> tuple[str, ...]:
+    """The fork server's preload list for evaluating ``agent``: ``PRELOAD``, what learned or
+    plug-in agents commonly import, and ``limits.agent_preload`` (the evaluator's choice)."""
+    from hbmp_bench.agents.learned import TRAIN_COMMANDS
+
+    extra: tuple[str, ...] = ()
+    if agent is not None and (agent.endswith(".pt") or agent in TRAIN_COMMANDS):
+        extra = LEARNED_PRELOAD
+    elif agent is not None and ":" in agent:
+        extra = ("torch",)
+    return tuple(dict.fromkeys((*PRELOAD, *extra, *limits.agent_preload)))
 
 
 _LIVE: set[int] = set()
@@ -58,8 +74,9 @@ def default_start_method() -> str:
     return "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
 
 
-def sandbox_context(start_method: str | None, limits: RunnerLimits):
-    """The multiprocessing context agent and env processes start from.
+def sandbox_context(start_method: str | None, limits: RunnerLimits, agent: str | None = None):
+    """The multiprocessing context agent and env processes start from (its fork server, when
+    this call starts it, preloads ``preload_for(agent, limits)``).
 
     Checks ``limits.agent_user`` (ValueError for an unknown user when root) and makes this
     process non-dumpable, so an agent process of the same user can neither trace it nor read
@@ -72,7 +89,7 @@ def sandbox_context(start_method: str | None, limits: RunnerLimits):
     protect_process()
     ctx = mp.get_context(start_method)
     if start_method == "forkserver":
-        ctx.set_forkserver_preload(list(PRELOAD))
+        ctx.set_forkserver_preload(list(preload_for(agent, limits)))
     return ctx
 
 
@@ -101,8 +118,8 @@ def end_agent(proc, wait_s: float = 0.0) -> int | None:
     proc.join(wait_s)
     code = proc.exitcode
     kill_session(proc.pid)
-    proc.join(5.0)
-    if proc.is_alive():
+    proc.join(1.0)
+    if proc.is_alive():  # killed before it had a session of its own
         proc.kill()
         proc.join(5.0)
     _LIVE.discard(proc.pid)
@@ -136,7 +153,7 @@ def describe_agent(agent: str, limits: RunnerLimits | None = None, start_method:
     (its env needs and fingerprint), so a bad name fails before any episode and no agent code
     runs in the caller. Raises ``AgentBuildError`` with the agent's error otherwise."""
     limits = limits or RunnerLimits()
-    ctx = sandbox_context(start_method, limits)
+    ctx = sandbox_context(start_method, limits, agent)
     env_sock, agent_sock = socket.socketpair()
     life_r, life_w = ctx.Pipe(duplex=False)
     proc = start_agent(ctx, agent, agent_sock, life_r, limits)
@@ -304,6 +321,8 @@ class EpisodePool:
         attempts: dict[EpisodeTask, int] = {}
         if not pending:
             return
+        if self.ctx.get_start_method() == "forkserver":  # takes effect if no fork server runs yet
+            self.ctx.set_forkserver_preload(list(preload_for(pending[0].agent, self.limits)))
         while len(self._slots) < min(self.workers, len(pending)):
             self._slots.append(_Slot(self.ctx, self.limits))
         while pending or any(s.task is not None for s in self._slots):

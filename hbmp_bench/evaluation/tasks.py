@@ -71,6 +71,9 @@ class RunnerLimits:
         agent_user: when the evaluator runs as root, the agent process switches to this
             unprivileged user before it loads the agent (see ``sandbox``); None keeps root, which
             lets the agent forge results: only for trusted agents. Ignored when not root.
+        agent_preload: modules the fork server imports once, so that an agent process, started
+            for every episode, finds them loaded (e.g. a heavy library the agent imports). They
+            run in the evaluator's fork server: name trusted libraries only, never the agent's.
 
     Every episode starts a fresh agent process, so the agent limits hold per episode.
     """
@@ -88,6 +91,7 @@ class RunnerLimits:
     agent_file_mb: int | None = 1024
     agent_processes: int | None = 512
     agent_user: str | None = "nobody"
+    agent_preload: tuple[str, ...] = ()
 
     def __post_init__(self):
         for name in ("decision_timeout_s", "agent_start_timeout_s", "start_timeout_s", "watchdog_s"):
@@ -99,6 +103,10 @@ class RunnerLimits:
                 raise ValueError(f"{name} must be a positive integer or None, got {value!r}")
         if self.agent_user is not None and (not isinstance(self.agent_user, str) or not self.agent_user.strip()):
             raise ValueError(f"agent_user must be a user name or None, got {self.agent_user!r}")
+        object.__setattr__(self, "agent_preload", tuple(self.agent_preload))
+        bad = [m for m in self.agent_preload if not isinstance(m, str) or not m.replace(".", "").replace("_", "").isalnum()]
+        if bad:
+            raise ValueError(f"agent_preload must name modules (a.b.c), got {bad}")
         if self.retries < 0:
             raise ValueError(f"retries must be >= 0, got {self.retries}")
         if self.max_decisions is not None and self.max_decisions <= 0:

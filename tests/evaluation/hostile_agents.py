@@ -18,6 +18,7 @@ import resource
 import signal
 import socket
 import struct
+import sys
 import time
 from pathlib import Path
 
@@ -47,6 +48,22 @@ def channel_socket() -> socket.socket:
         if type(obj).__name__ == "AgentEnd" and isinstance(getattr(obj, "sock", None), socket.socket):
             return obj.sock
     raise RuntimeError("no channel found in gc")
+
+
+def pending_request() -> int:
+    """The number of the request the agent process is answering, read from its serving loop's
+    frame (what an attacker who read the package's code would do)."""
+    frame = sys._getframe()
+    while frame is not None:
+        if frame.f_code.co_name == "agent_main" and "number" in frame.f_locals:
+            return frame.f_locals["number"]
+        frame = frame.f_back
+    raise RuntimeError("not inside the agent process's serving loop")
+
+
+def reply(tag: bytes, body: bytes = b"") -> bytes:
+    """A framed reply to the pending request, made by hand."""
+    return frame(tag + struct.pack("<I", pending_request()) + body)
 
 
 def frame(payload: bytes) -> bytes:
@@ -96,7 +113,7 @@ class UndecodableAgent(_Base):
     """Sends a well-framed reply the env cannot decode: an error text that is not UTF-8."""
 
     def attack(self):
-        channel_socket().sendall(frame(b"E\xff\xfe\xfd not utf-8"))
+        channel_socket().sendall(reply(b"E", b"\xff\xfe\xfd not utf-8"))
 
 
 class RawBytesAgent(_Base):
@@ -140,11 +157,11 @@ class ClosingAgent(_Base):
 
 
 class FloodAgent(_Base):
-    """Answers one request with a thousand valid actions."""
+    """Answers one request with a thousand copies of a valid reply."""
 
     def attack(self):
         sock = channel_socket()
-        action = frame(b"A" + struct.pack("<q", 0))
+        action = reply(b"A", struct.pack("<q", 0))
         for _ in range(1000):
             sock.sendall(action)
 

@@ -10,6 +10,7 @@ tests assert what each case guarantees, and run the agent as the evaluator's own
 import json
 import os
 import pwd
+import re
 import time
 from pathlib import Path
 
@@ -64,7 +65,11 @@ def test_channel_attacks_are_the_agents_failures(agent_dir):
     assert_counted_failure(records["HugeErrorAgent"], "agent act() raised")
     assert len(records["HugeErrorAgent"].error.encode()) <= MAX_TEXT_BYTES  # cut, not 10 MB in the records
     assert_counted_failure(records["ClosingAgent"], "closed its channel during act() at decision 1")
-    assert_counted_failure(records["FloodAgent"], "more than one reply to a request")
+    # seen as data nobody asked for, or, when the two processes run in lockstep, as a second reply
+    # to the same request arriving for the next one
+    assert_counted_failure(records["FloodAgent"], "")
+    assert re.search("more than one reply to a request|reply to request (\\d+), but the pending request is",
+                     records["FloodAgent"].error)
     assert records["expert"].end_reason == DECISION_CAP and records["expert"].error == ""  # the pool is unharmed
 
 

@@ -39,24 +39,24 @@ def framed(payload: bytes) -> bytes:
 
 @pytest.mark.parametrize("action", [0, 4, -3, 2**63 - 1, (0.5, -1.0), tuple(float(k) for k in range(MAX_VECTOR))])
 def test_actions_round_trip(action):
-    reply = decode_reply(encode_action(action))
-    assert reply.kind == ACTION and reply.value == action
+    reply = decode_reply(encode_action(action, 7))
+    assert reply.kind == ACTION and reply.value == action and reply.request == 7
 
 
 def test_ready_error_and_ok_round_trip():
     description = AgentDescription("hbmp_bench.envs.control_env:ControlEnv", (("observation", "vehicle_centric"),), "ab12")
     assert decode_reply(encode_ready(description)).value == description
-    assert decode_reply(encode_ok()).kind == OK
-    assert decode_reply(encode_error("boom ✓")).value == "boom ✓"
+    assert decode_reply(encode_ok(3)).kind == OK
+    assert decode_reply(encode_error("boom ✓", 2)).value == "boom ✓"
     long = decode_reply(encode_error("é" * MAX_TEXT_BYTES))  # cut on a character boundary
     assert long.kind == ERROR and len(long.value.encode()) <= MAX_TEXT_BYTES and set(long.value) == {"é"}
 
 
 def test_unsendable_actions_are_refused_by_the_agent_side():
     with pytest.raises(ValueError, match="64 bits"):
-        encode_action(2**70)
+        encode_action(2**70, 1)
     with pytest.raises(ValueError, match="1 to"):
-        encode_action(tuple([0.0] * (MAX_VECTOR + 1)))
+        encode_action(tuple([0.0] * (MAX_VECTOR + 1)), 1)
 
 
 class _Exploit:
@@ -64,25 +64,29 @@ class _Exploit:
         return (exec, ("raise SystemExit('ran')",))
 
 
+N = struct.pack("<I", 1)  # a request number
+
+
 @pytest.mark.parametrize("frame, message", [
-    (b"", "empty reply"),
+    (b"", "too short for a tag and a request number"),
+    (b"A\x00\x00", "too short for a tag and a request number"),
     (pickle.dumps(("action", _Exploit())), "unknown reply tag b'\\x80'"),
-    (b"Z", "unknown reply tag"),
-    (b"A" + b"\x00" * 7, "integer action of 7 bytes"),
-    (b"A" + b"\x00" * 9, "integer action of 9 bytes"),
-    (b"V", "vector action of 0 bytes"),
-    (b"V" + b"\x00" * 12, "vector action of 12 bytes"),
-    (b"V" + struct.pack("<d", math.nan), "NaN or infinite"),
-    (b"V" + struct.pack("<d", math.inf), "NaN or infinite"),
-    (b"V" + b"\x00" * 8 * (MAX_VECTOR + 1), "vector action of"),
-    (b"K!", "stray bytes"),
-    (b"E\xff\xfe", "not UTF-8"),
-    (b"R{not json", "off its schema: not JSON"),
-    (b'R{"env_factory": null, "env_kwargs": {}}', "exactly env_factory, env_kwargs and fingerprint"),
-    (b'R{"env_factory": null, "env_kwargs": {"x": [1]}, "fingerprint": ""}', "JSON scalar"),
-    (b'R{"env_factory": null, "env_kwargs": {"x": NaN}, "fingerprint": ""}', "NaN is not allowed"),
-    (b'R{"env_factory": 3, "env_kwargs": {}, "fingerprint": ""}', "env_factory must be null or a string"),
-    (b"E" + b"x" * MAX_REPLY_BYTES, "the limit is"),
+    (b"Z" + N, "unknown reply tag"),
+    (b"A" + N + b"\x00" * 7, "integer action of 7 bytes"),
+    (b"A" + N + b"\x00" * 9, "integer action of 9 bytes"),
+    (b"V" + N, "vector action of 0 bytes"),
+    (b"V" + N + b"\x00" * 12, "vector action of 12 bytes"),
+    (b"V" + N + struct.pack("<d", math.nan), "NaN or infinite"),
+    (b"V" + N + struct.pack("<d", math.inf), "NaN or infinite"),
+    (b"V" + N + b"\x00" * 8 * (MAX_VECTOR + 1), "vector action of"),
+    (b"K" + N + b"!", "stray bytes"),
+    (b"E" + N + b"\xff\xfe", "not UTF-8"),
+    (b"R" + N + b"{not json", "off its schema: not JSON"),
+    (b"R" + N + b'{"env_factory": null, "env_kwargs": {}}', "exactly env_factory, env_kwargs and fingerprint"),
+    (b"R" + N + b'{"env_factory": null, "env_kwargs": {"x": [1]}, "fingerprint": ""}', "JSON scalar"),
+    (b"R" + N + b'{"env_factory": null, "env_kwargs": {"x": NaN}, "fingerprint": ""}', "NaN is not allowed"),
+    (b"R" + N + b'{"env_factory": 3, "env_kwargs": {}, "fingerprint": ""}', "env_factory must be null or a string"),
+    (b"E" + N + b"x" * MAX_REPLY_BYTES, "the limit is"),
 ], ids=lambda v: v if isinstance(v, str) else None)
 def test_malformed_replies_are_protocol_errors_and_run_nothing(frame, message):
     with pytest.raises(ProtocolError, match=re.escape(message)):
@@ -116,9 +120,14 @@ def test_a_request_and_its_reply(pair):
     end, agent_sock, _ = pair
     agent = AgentEnd(agent_sock)
     end.request(("act", {"x": 1}, {}), timeout_s=1.0)
-    assert agent.receive() == ("act", {"x": 1}, {})
-    agent.reply(encode_action(3))
+    assert agent.receive() == ("act", 1, {"x": 1}, {})
+    agent.reply(encode_action(3, 1))
     assert end.reply(timeout_s=1.0).value == 3
+    end.request(("reset", {}), timeout_s=1.0)
+    assert agent.receive() == ("reset", 2, {})
+    agent.reply(encode_ok(1))  # a reply to the earlier request
+    with pytest.raises(ProtocolError, match="reply to request 1, but the pending request is 2"):
+        end.reply(timeout_s=1.0)
 
 
 def test_an_agent_that_does_not_read_cannot_block_the_env(pair):
@@ -154,12 +163,12 @@ def test_an_oversized_announcement_is_refused_before_reading_it(pair):
 
 def test_unsolicited_replies_are_refused(pair):
     end, agent_sock, _ = pair
-    agent_sock.sendall(framed(encode_action(1)) * 2)
+    agent_sock.sendall(framed(encode_ready(AgentDescription())) * 2)
     with pytest.raises(ProtocolError, match="more than one reply"):
         end.reply(timeout_s=1.0)
     env_sock, agent_sock2 = socket.socketpair()
     try:
-        agent_sock2.sendall(framed(encode_ok()))  # nobody asked yet
+        agent_sock2.sendall(framed(encode_ok(1)))  # nobody asked yet
         with pytest.raises(ProtocolError, match="nobody asked for"):
             EnvEnd(env_sock).request(("reset", {}), timeout_s=1.0)
     finally:
@@ -172,13 +181,13 @@ def test_a_slow_but_honest_reply_arrives(pair):
 
     def answer():
         time.sleep(0.2)
-        agent_sock.sendall(framed(encode_ok())[:3])
+        agent_sock.sendall(framed(encode_ready(AgentDescription()))[:3])
         time.sleep(0.2)
-        agent_sock.sendall(framed(encode_ok())[3:])
+        agent_sock.sendall(framed(encode_ready(AgentDescription()))[3:])
 
     thread = threading.Thread(target=answer)
     thread.start()
-    assert end.reply(timeout_s=2.0).kind == OK
+    assert end.reply(timeout_s=2.0).kind == READY
     thread.join()
     assert len(waits) >= 4
 

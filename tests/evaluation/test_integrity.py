@@ -128,3 +128,16 @@ def test_the_agent_user_must_exist_and_not_be_root(monkeypatch):
         agent_account("root")
     monkeypatch.setattr(os, "geteuid", lambda: 1000)
     assert agent_account("nobody") is None  # not root: the agent keeps the caller's user
+
+
+def test_the_fork_server_preloads_trusted_modules_only():
+    from hbmp_bench.evaluation.pool import PRELOAD, preload_for
+
+    limits = RunnerLimits(agent_preload=("numpy.linalg",))
+    assert preload_for("expert", RunnerLimits()) == PRELOAD
+    assert {"torch", "tensordict", "hbmp_bench.training.checkpoints"} <= set(preload_for("hbmp", limits))
+    assert {"torch", "tensordict"} <= set(preload_for("runs/il/policy.pt", limits))
+    plugin = preload_for("my_pkg.agents:Agent", limits)
+    assert "torch" in plugin and "numpy.linalg" in plugin and not any("my_pkg" in m for m in plugin)
+    with pytest.raises(ValueError, match="agent_preload"):
+        RunnerLimits(agent_preload=("os; import evil",))
