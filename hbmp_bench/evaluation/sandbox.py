@@ -303,16 +303,26 @@ def _live_pids() -> list[int]:
 
 
 def reap_orphans(parent: int, keep: Iterable[int], rounds: int = 20) -> int:
-    """SIGKILL every live child of ``parent`` (the fork server, see ``adopt_orphans``) not in
-    ``keep`` (the pool's env and agent processes), until none is left; returns how many were
-    found. Whatever an agent forked ends up here once its own parent is gone."""
+    """SIGKILL every live child of ``parent`` (the fork server, see ``adopt_orphans``) that is
+    outside ``parent``'s session and not in ``keep`` (the running agent processes), until none is
+    left; returns how many were found.
+
+    Whatever an agent forked ends up here once its own parent is gone. The session tells it from
+    the fork server's own children (env processes, other users of the fork server): those share
+    its session, while an agent and all it forks live in the agent's session or in sessions of
+    their own, and no process can join another session.
+    """
     keep = set(keep)
+    home = _stat_fields(parent)
+    if len(home) < 4:
+        return 0
     found = 0
     for _ in range(rounds):
         strays = []
         for pid in _live_pids():
             fields = _stat_fields(pid)
-            if len(fields) > 1 and fields[0] != "Z" and fields[1] == str(parent) and pid not in keep:
+            if (len(fields) > 3 and fields[0] != "Z" and fields[1] == str(parent) and fields[3] != home[3]
+                    and pid not in keep):
                 strays.append(pid)
         if not strays:
             return found

@@ -153,6 +153,27 @@ def test_forked_children_do_not_outlive_the_episode(agent_dir):
     assert records["ForkingAgent"].end_reason == DECISION_CAP
 
 
+def test_the_reaper_spares_the_fork_servers_other_children():
+    """Another user of the same fork server (a training worker, say) is not an agent's orphan."""
+    import multiprocessing as mp
+
+    from hbmp_bench.evaluation.pool import default_start_method
+
+    if default_start_method() != "forkserver":
+        pytest.skip("orphans are reaped through the fork server")
+    with EpisodePool(1, QUICK) as pool:
+        worker = mp.get_context("forkserver").Process(target=time.sleep, args=(60,))
+        worker.start()
+        try:
+            tasks = suite_tasks("corl2017", "hostile_agents:ForkingAgent", towns=["Town01"], tasks=["Straight"],
+                                episodes=1, fidelity="event")
+            (outcome,) = list(pool.imap(tasks))
+            assert outcome.record.end_reason == DECISION_CAP and worker.is_alive()
+        finally:
+            worker.kill()
+            worker.join()
+
+
 def test_memory_is_capped(agent_dir):
     limits = RunnerLimits(decision_timeout_s=20.0, max_decisions=4, agent_memory_mb=2560)
     records = run(["MemoryHogAgent"], limits)
