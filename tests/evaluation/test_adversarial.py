@@ -21,7 +21,7 @@ from hbmp_bench.evaluation import EpisodePool, RunnerLimits, evaluate, suite_tas
 from hbmp_bench.evaluation.channel import MAX_TEXT_BYTES
 from hbmp_bench.evaluation.integrity import TamperedError
 from hbmp_bench.evaluation.leaderboard import entry_path, load_entries, results_document, submit, write_json
-from hbmp_bench.metrics.records import AGENT_ERROR, DECISION_CAP, SIM_ERROR, EpisodeRecord, read_records
+from hbmp_bench.metrics.records import AGENT_ERROR, DECISION_CAP, EpisodeRecord, read_records
 from hbmp_bench.metrics.report import build_report, records_frame
 
 pytestmark = pytest.mark.slow
