@@ -106,10 +106,11 @@ class _AgentLink:
         self.limits = limits
 
     def _exchange(self, message: tuple | None, expected: str, timeout_s: float, what: str) -> Any:
+        deadline = time.monotonic() + timeout_s  # one allowance for taking the request and answering it
         try:
             if message is not None:
                 self.end.request(message, timeout_s)
-            reply = self.end.reply(timeout_s)
+            reply = self.end.reply(max(deadline - time.monotonic(), 1e-3))
         except channel.ChannelTimeout:
             raise AgentFailure(f"agent did not answer {what} within {timeout_s:g} s (hung, too slow, or not "
                                f"reading its channel); the agent process was stopped") from None
