@@ -234,3 +234,14 @@ def test_train_resume_hint_follows_what_the_interrupt_left(tmp_path):
         else:  # interrupted after the last checkpoint, while writing the outputs: nothing to resume
             assert hint == f"all 10 episodes are trained ({checkpoint}); {tmp_path / 'policy.pt'}, the curves or the " \
                            "model card may be missing"
+
+
+def test_missing_checkpoint_through_evaluate_is_one_line(tmp_path, capsys):
+    """The agent is built in its sandboxed process before any episode: its one-line error crosses
+    the channel as one line, and nothing is written."""
+    out = tmp_path / "runs"
+    line = _one_line_error(capsys, ["evaluate", "--suite", "corl2017", "--agent", str(tmp_path / "nowhere.pt"),
+                                    "--towns", "Town01", "--tasks", "Straight", "--episodes", "1", "--workers", "1",
+                                    "--out", str(out)])
+    assert line == f"hbmp-bench: error: agent could not be built: no checkpoint file '{tmp_path / 'nowhere.pt'}'"
+    assert not out.exists()

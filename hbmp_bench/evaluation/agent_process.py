@@ -76,7 +76,7 @@ def _build(spec: str, hint: str = "") -> tuple[Any, str]:
         agent = load_agent(spec)
         channel.AgentDescription.of(agent)
         return agent, ""
-    except UserError as exc:  # already one line naming the agent and where it failed
+    except (UserError, FileNotFoundError) as exc:  # already one line naming the agent and where it failed
         return None, f"agent could not be built: {exc}{hint}"
     except BaseException:  # noqa: BLE001 - every failure is reported to the env process
         return None, _error_text(f"{spec!r} could not be built: load_agent") + hint
