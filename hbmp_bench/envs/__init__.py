@@ -1,9 +1,18 @@
-"""Environments: the gymnasium behavior env over a shared driving world."""
+"""Environments: the gymnasium behavior env over a shared driving world.
 
-from hbmp_bench.envs.behavior_env import BehaviorEnv
-from hbmp_bench.envs.observation import ROAD_FEATURES, ObservationConfig
+The registration helpers (``env_ids``, ``make``, ``register_envs``, ``TRAINING_ID``) load with the
+package; the env classes and their constants load on first access (they import SUMO and the
+planner), so that ``import hbmp_bench`` registers the ids without them.
+"""
+
+from hbmp_bench._lazy import lazy_exports
 from hbmp_bench.envs.registration import TRAINING_ID, env_ids, make, register_envs
-from hbmp_bench.envs.world import BEHAVIORS, DrivingWorld, WorldConfig
 
 __all__ = ["BEHAVIORS", "ROAD_FEATURES", "TRAINING_ID", "BehaviorEnv", "DrivingWorld", "ObservationConfig",
            "WorldConfig", "env_ids", "make", "register_envs"]
+
+__getattr__, __dir__ = lazy_exports(__name__, {
+    ".behavior_env": ("BehaviorEnv",),
+    ".observation": ("ROAD_FEATURES", "ObservationConfig"),
+    ".world": ("BEHAVIORS", "DrivingWorld", "WorldConfig"),
+})

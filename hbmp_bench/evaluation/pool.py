@@ -43,9 +43,13 @@ POLL_S = 0.2
 """How often the pool checks watchdogs while no message arrives [s]."""
 
 PRELOAD = ("hbmp_bench.evaluation.forkserver_guard", "hbmp_bench.evaluation.env_process",
-           "hbmp_bench.evaluation.agent_process", "hbmp_bench.envs.behavior_env", "hbmp_bench.agents")
+           "hbmp_bench.evaluation.agent_process", "hbmp_bench.envs.behavior_env", "hbmp_bench.agents",
+           "sumolib", "hbmp_bench.planning.rollout")
 """Modules the fork server imports once, so a slot (re)starts in a fraction of a second.
-``forkserver_guard`` makes the fork server non-dumpable. Only trusted modules: never the agent's."""
+``forkserver_guard`` makes the fork server non-dumpable. Only trusted modules: never the agent's.
+The heavy ones an episode needs are named on purpose, as the package imports them where they are
+used: libsumo (with ``behavior_env``), sumolib (the road network) and numba (the planner's
+roll-out)."""
 LEARNED_PRELOAD = ("torch", "tensordict", "hbmp_bench.training.checkpoints")
 """Added to ``PRELOAD`` for learned agents (registered ones and ``.pt`` checkpoints), so the agent
 process each episode starts does not import torch again (seconds); ``torch`` alone for

@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-import sumolib
 
 TURN_DIRECTIONS = frozenset("lLrR")
 """SUMO link directions that count as a turn (left, partly left, right, partly right)."""
@@ -77,6 +76,8 @@ class RoadNetwork:
     """
 
     def __init__(self, net_path: str | Path):
+        import sumolib
+
         self.path = Path(net_path)
         net = sumolib.net.readNet(str(self.path), withInternal=True, withPedestrianConnections=False)
         self.lanes: dict[str, Lane] = {}

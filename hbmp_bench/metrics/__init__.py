@@ -1,5 +1,9 @@
-"""Metric detectors, episode records and pandas summaries (reports: ``hbmp_bench.metrics.report``)."""
+"""Metric detectors, episode records and pandas summaries (reports: ``hbmp_bench.metrics.report``).
 
+``summarize`` and ``success_table`` load on first access (they import pandas).
+"""
+
+from hbmp_bench._lazy import lazy_exports
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents
 from hbmp_bench.metrics.geometry import LaneLocator
 from hbmp_bench.metrics.records import (
@@ -10,7 +14,6 @@ from hbmp_bench.metrics.records import (
     read_records,
     repair_records,
 )
-from hbmp_bench.metrics.summary import summarize, success_table
 
 __all__ = [
     "EVENT_KINDS",
@@ -27,3 +30,5 @@ __all__ = [
     "success_table",
     "summarize",
 ]
+
+__getattr__, __dir__ = lazy_exports(__name__, {".summary": ("summarize", "success_table")})

@@ -25,12 +25,34 @@ positive to the LEFT of the path direction; ``theta_e = yaw - heading`` wrapped 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
-from .rollout import UniformSegments
+__all__ = ["Path", "UniformSegments", "wrap_angle"]
 
-__all__ = ["Path", "wrap_angle"]
+
+class UniformSegments(NamedTuple):
+    """Segment arrays of a path resampled at uniform arc-length steps (all (N,) float64).
+
+    ``x0, y0``: segment start [m]; ``tx, ty``: unit tangent; ``chord``: chord length [m];
+    ``s``: arc length at the start [m]; ``s_per_m``: arc length per chord metre (chords across
+    a kink are shorter than the step); ``heading, kappa``: at the start [rad, 1/m]; ``dh, dk``:
+    their change along the segment. ``inv_ds``: 1 / step [1/m].
+    """
+
+    x0: np.ndarray
+    y0: np.ndarray
+    tx: np.ndarray
+    ty: np.ndarray
+    chord: np.ndarray
+    s: np.ndarray
+    s_per_m: np.ndarray
+    heading: np.ndarray
+    kappa: np.ndarray
+    dh: np.ndarray
+    dk: np.ndarray
+    inv_ds: float
 
 
 def wrap_angle(a):

@@ -70,7 +70,6 @@ import numpy as np
 
 from .control import control_law, linear_speed_profile, omega_limit
 from .frame import Path
-from .rollout import roll_out
 from .state import Obstacles, VehicleState
 
 __all__ = ["PlannerConfig", "PlanningProblem", "PlanResult", "plan", "COST_NAMES"]
@@ -472,7 +471,9 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
     # covers everything a sample can reach (extended straight past the path's ends)
     lp = path.resample(ds, s0 - 10.0 - 2 * ds, s0 + vmax * cfg.horizon + 20.0, extrapolate=True)
 
-    # ---- roll-out (compiled: sequential in time, see .rollout)
+    # ---- roll-out (compiled: sequential in time, see .rollout; numba loads on the first call)
+    from .rollout import roll_out
+
     hold = max(1, round(cfg.omega_hold / dt))
     X, Y, PSI, SS, EE, W = roll_out(
         ego.x, ego.y, ego.yaw, s0, e0, th0, k0, np.ascontiguousarray(V.T), KTH, KE,

@@ -10,44 +10,23 @@ agree.
 
 The windowed projection searches only segments ``-n_back..+n_ahead`` around the segment of a
 predicted arc length, on a path resampled at uniform arc-length steps
-(:meth:`.frame.Path.uniform_segments`).
+(:meth:`.frame.Path.uniform_segments`, :class:`.frame.UniformSegments`).
+
+numba is imported here only: the planner imports this module inside :func:`.planner.plan`, so
+that importing the planning package does not load numba.
 """
 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
-__all__ = ["UniformSegments", "roll_out"]
+__all__ = ["roll_out"]
 
 #: Guard of ``1 - kappa e`` in the control law (see :func:`.control.control_law`).
 MIN_DENOMINATOR = 0.1
-
-
-class UniformSegments(NamedTuple):
-    """Segment arrays of a path resampled at uniform arc-length steps (all (N,) float64).
-
-    ``x0, y0``: segment start [m]; ``tx, ty``: unit tangent; ``chord``: chord length [m];
-    ``s``: arc length at the start [m]; ``s_per_m``: arc length per chord metre (chords across
-    a kink are shorter than the step); ``heading, kappa``: at the start [rad, 1/m]; ``dh, dk``:
-    their change along the segment. ``inv_ds``: 1 / step [1/m].
-    """
-
-    x0: np.ndarray
-    y0: np.ndarray
-    tx: np.ndarray
-    ty: np.ndarray
-    chord: np.ndarray
-    s: np.ndarray
-    s_per_m: np.ndarray
-    heading: np.ndarray
-    kappa: np.ndarray
-    dh: np.ndarray
-    dk: np.ndarray
-    inv_ds: float
 
 
 @njit(cache=True, nogil=True)
@@ -88,7 +67,7 @@ def roll_out(x, y, yaw, s0, e0, th0, k0, V, KTH, KE, LIM, w_off, hold, dt, n_bac
         KTH, KE: (T, S) control-law gains [1/m, 1/m^2]; LIM: (T, S) |omega| limit [rad/s].
         w_off: (S,) offset added to omega for the first ``hold`` steps [rad/s].
         dt: step [s]; ``n_back, n_ahead``: projection window [segments].
-        x0 ... inv_ds: the reference's :class:`UniformSegments`.
+        x0 ... inv_ds: the reference's :class:`.frame.UniformSegments`.
 
     Returns:
         ``(X, Y, PSI, SS, EE, W)``: (T, S) poses [m, m, rad (continuous)] and Frenet

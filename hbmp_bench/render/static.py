@@ -19,7 +19,6 @@ import weakref
 from dataclasses import dataclass
 
 import numpy as np
-import sumolib
 from PIL import Image, ImageDraw
 
 from hbmp_bench.maps.roadnet import RoadNetwork
@@ -48,6 +47,8 @@ class Walkways:
 @functools.lru_cache(maxsize=8)
 def read_walkways(net_path: str) -> Walkways:
     """Sidewalks, crossings and walking areas of a net file (cached)."""
+    import sumolib
+
     net = sumolib.net.readNet(net_path, withInternal=True, withPedestrianConnections=True)
     sidewalks, crossings, areas, ids = [], [], [], set()
     for edge in net.getEdges(withInternal=True):

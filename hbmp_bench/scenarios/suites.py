@@ -10,13 +10,16 @@ from __future__ import annotations
 import dataclasses
 import functools
 import zlib
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from hbmp_bench.errors import UnknownNameError
 from hbmp_bench.maps import TOWNS, available_maps, net_path
-from hbmp_bench.maps.roadnet import RoadNetwork, load_road_network
 from hbmp_bench.scenarios.spec import TASKS, Episode, Suite, Traffic
+
+if TYPE_CHECKING:
+    from hbmp_bench.maps.roadnet import RoadNetwork
 
 MEAN_ROUTE_LENGTH_M: dict[str, tuple[float, float, float]] = {
     "Town01": (200.0, 400.0, 770.0),
@@ -119,7 +122,9 @@ def check_task(task: str) -> str:
 
 
 def road_network(town: str) -> RoadNetwork:
-    """The lane graph of a town (cached per process)."""
+    """The lane graph of a town (cached per process; sumolib loads on the first call)."""
+    from hbmp_bench.maps.roadnet import load_road_network
+
     return load_road_network(str(net_path(check_town(town))))
 
 

@@ -4,8 +4,12 @@
         hbmp_smoke("my_package.agents:MyAgent")    # fails with a readable message
 
 Or without pytest: ``hbmp_bench.testing.smoke_run("my_package.agents:MyAgent")``.
+
+The names load on first access: pytest loads the plugin, and so this package, in every session.
 """
 
-from hbmp_bench.testing.smoke import SmokeConfig, SmokeFailure, SmokeResult, smoke_run
+from hbmp_bench._lazy import lazy_exports
 
 __all__ = ["SmokeConfig", "SmokeFailure", "SmokeResult", "smoke_run"]
+
+__getattr__, __dir__ = lazy_exports(__name__, {".smoke": ("SmokeConfig", "SmokeFailure", "SmokeResult", "smoke_run")})

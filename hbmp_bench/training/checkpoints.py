@@ -14,7 +14,8 @@ A checkpoint is a dict:
     train                the training options and the command that produced it
 
 Only str, int, float, bool, None, lists and dicts of them, and tensors go in, so the file loads
-under ``weights_only=True``.
+under ``weights_only=True``. torch is imported by the functions that need it, so that ``KINDS``
+(the command line's choices) costs nothing to import.
 """
 
 from __future__ import annotations
@@ -25,8 +26,6 @@ import re
 import tempfile
 from typing import Any
 
-import torch
-
 from hbmp_bench.errors import UserError
 
 CHECKPOINT_FORMAT = "hbmp_bench.checkpoint.v1"
@@ -35,6 +34,8 @@ PLAIN_TYPES = (str, int, float, bool, type(None))
 
 
 def _check_plain(value: Any, where: str) -> None:
+    import torch
+
     if isinstance(value, PLAIN_TYPES) or isinstance(value, torch.Tensor):
         return
     if isinstance(value, (list, tuple)):
@@ -57,6 +58,8 @@ def save_checkpoint(path: str, checkpoint: dict[str, Any]) -> None:
     if checkpoint.get("kind") not in KINDS:
         raise ValueError(f"checkpoint kind must be one of {KINDS}, got {checkpoint.get('kind')!r}")
     _check_plain(checkpoint, "checkpoint")
+    import torch
+
     folder = os.path.dirname(os.path.abspath(path))
     os.makedirs(folder, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=".ckpt-", suffix=".tmp", dir=folder)
@@ -88,6 +91,8 @@ def load_checkpoint(path: str, kinds: tuple[str, ...] = KINDS) -> dict[str, Any]
     """
     if not os.path.isfile(path):
         raise FileNotFoundError(f"no checkpoint file {path!r}")
+    import torch
+
     try:
         checkpoint = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - torch reports a damaged file with many exception types
