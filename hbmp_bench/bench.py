@@ -1,6 +1,7 @@
 """Throughput of the package against raw SUMO and highway-env, measured in one run.
 
-``hbmp-bench bench [--json] [--quick] [--out FILE] [--profile N]`` (also ``benchmarks/throughput.py``).
+``hbmp-bench bench [--json] [--quick] [--check] [--out FILE] [--profile N]`` (also
+``benchmarks/throughput.py``). It exits 0 after printing; with ``--check``, 1 when a target fails.
 
 What is measured, on the same scenario and traffic (``corl2017`` NavigationDynamic episode 0 of
 each town, env reset seed 0):
@@ -17,9 +18,15 @@ each town, env reset seed 0):
 - **highway-env** ``highway-fast-v0`` and ``intersection-v0``: random actions, decisions/s.
 - **scaling**: 1 and 2 worker processes (spawned, one env each, random actions, started together
   behind a barrier), total decisions/s; the workers also report their peak memory (``ru_maxrss``).
+- **import**: ``import hbmp_bench`` in a fresh interpreter, best of ``import_repeats`` (``import_s``).
 
-The targets are those of the throughput issue: continuous ≥ 0.4× raw, event ≥ 0.7× raw,
-decisions/s ≥ 10× (event) and ≥ 5× (continuous) highway-fast-v0, two workers ≥ 1.7× one.
+The planner's compiled roll-out is compiled (or loaded from numba's cache) before anything is timed,
+in this process and in each scaling worker (:func:`~hbmp_bench.planning.planner.compile_kernels`): a
+first planner call would otherwise include the compile.
+
+The targets (:class:`Targets`) are those of the throughput issue: continuous ≥ 0.4× raw, event ≥
+0.7× raw, decisions/s ≥ 10× (event) and ≥ 5× (continuous) highway-fast-v0, two workers ≥ 1.7×
+one; and of the speed issue: ``import hbmp_bench`` ≤ 0.3 s.
 """
 
 from __future__ import annotations
@@ -35,6 +42,7 @@ import os
 import platform
 import pstats
 import resource
+import subprocess
 import sys
 import tempfile
 import time
@@ -47,6 +55,35 @@ from hbmp_bench import __version__
 
 FIDELITIES = ("event", "continuous")
 HIGHWAY_ENVS = ("highway-fast-v0", "intersection-v0")
+IMPORT_CODE = "import time; t = time.perf_counter(); import hbmp_bench; print(time.perf_counter() - t)"
+"""What ``import_s`` times, in a fresh interpreter."""
+
+
+@dataclass(frozen=True)
+class Targets:
+    """Pass marks of :func:`target_checks` (ratios are at least, times at most).
+
+    Attributes:
+        continuous_to_raw: continuous env sim steps/s ÷ raw SUMO steps/s, at least.
+        event_to_raw: event env sim steps/s ÷ raw SUMO steps/s, at least.
+        event_to_highway: event env decisions/s ÷ highway-fast-v0 decisions/s, at least.
+        continuous_to_highway: continuous env decisions/s ÷ highway-fast-v0 decisions/s, at least.
+        two_workers_to_one: decisions/s of 2 workers ÷ 1 worker, at least.
+        import_s: ``import hbmp_bench`` in a fresh interpreter [s], at most.
+    """
+
+    continuous_to_raw: float = 0.4
+    event_to_raw: float = 0.7
+    event_to_highway: float = 10.0
+    continuous_to_highway: float = 5.0
+    two_workers_to_one: float = 1.7
+    import_s: float = 0.3
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, (int, float)) or value != value:
+                raise ValueError(f"target {f.name} must be a number, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -62,6 +99,8 @@ class BenchConfig:
         scaling_workers: worker counts of the scaling measurement (empty skips it).
         scaling_seconds: wall time of each scaling run [s].
         scaling_town / scaling_fidelity: the env the workers run (random actions).
+        import_repeats: fresh interpreters that time ``import hbmp_bench``; the best counts (0 skips it).
+        targets: the pass marks.
     """
 
     towns: tuple[str, ...] = ("Town01", "Town03")
@@ -75,6 +114,8 @@ class BenchConfig:
     scaling_seconds: float = 15.0
     scaling_town: str = "Town01"
     scaling_fidelity: str = "continuous"
+    import_repeats: int = 3
+    targets: Targets = Targets()
 
     def __post_init__(self):
         if not self.towns:
@@ -87,6 +128,10 @@ class BenchConfig:
             raise ValueError(f"scaling_workers must be > 0, got {self.scaling_workers}")
         if self.scaling_fidelity not in FIDELITIES:
             raise ValueError(f"scaling_fidelity must be one of {FIDELITIES}, got {self.scaling_fidelity!r}")
+        if self.import_repeats < 0:
+            raise ValueError(f"import_repeats must be >= 0, got {self.import_repeats}")
+        if not isinstance(self.targets, Targets):
+            raise ValueError(f"targets must be a Targets, got {type(self.targets).__name__}")
 
     @classmethod
     def quick(cls) -> "BenchConfig":
@@ -201,6 +246,15 @@ def _make_env(cfg: BenchConfig, town: str, fidelity: str):
     return BehaviorEnv(town=town, task=cfg.task, suite=cfg.suite, episode_index=cfg.episode_index, fidelity=fidelity)
 
 
+def warm_up_kernels() -> float:
+    """Compile the planner's roll-out in this process (a no-op once done); returns the time it took [s]."""
+    from hbmp_bench.planning.planner import compile_kernels
+
+    t0 = time.perf_counter()
+    compile_kernels()
+    return time.perf_counter() - t0
+
+
 # ------------------------------------------------------------ measurements
 def measure_raw_sumo(cfg: BenchConfig, town: str) -> dict:
     """Bare ``libsumo.simulationStep()`` rate on the env's own scene (see the module doc)."""
@@ -221,6 +275,7 @@ def measure_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float | Non
     from hbmp_bench.agents import load_agent
 
     seconds = cfg.env_seconds if seconds is None else seconds
+    warm_up_s = warm_up_kernels()
     env = _make_env(cfg, town, fidelity)
     agent = load_agent("expert")
     step_length = env.config.step_length_s
@@ -250,7 +305,7 @@ def measure_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float | Non
     finally:
         env.close()
     return {"town": town, "fidelity": fidelity, "seconds": round(stepping, 3), "reset_seconds": round(resetting, 3),
-            "decisions": decisions, "sim_steps": sim_steps, "episodes_finished": episodes,
+            "warm_up_s": round(warm_up_s, 4), "decisions": decisions, "sim_steps": sim_steps, "episodes_finished": episodes,
             "decisions_per_s": round(decisions / stepping, 2), "sim_steps_per_s": round(sim_steps / stepping, 1),
             "latency": latency, "time_share": share}
 
@@ -283,6 +338,7 @@ def measure_highway(env_id: str, seconds: float, seed: int = 0) -> dict:
 def _scaling_worker(cfg: BenchConfig, seed: int, barrier, queue) -> None:
     """One training-style worker: its own env (own libsumo), random actions for ``scaling_seconds``."""
     try:
+        warm_up_kernels()
         env = _make_env(cfg, cfg.scaling_town, cfg.scaling_fidelity)
         env.action_space.seed(seed)
         env.reset(seed=seed)
@@ -322,28 +378,46 @@ def measure_scaling(cfg: BenchConfig, workers: int) -> dict:
             "peak_rss_mb_per_process": max(r["peak_rss_mb"] for r in rows), "per_worker": rows}
 
 
+def measure_import(repeats: int) -> dict:
+    """``import hbmp_bench`` timed in ``repeats`` fresh interpreters (this one's, importing the package
+    this process runs); ``import_s`` is the best [s]."""
+    package_root = str(Path(__file__).resolve().parent.parent)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, (package_root, os.environ.get("PYTHONPATH"))))}
+    runs = []
+    for _ in range(repeats):
+        out = subprocess.run([sys.executable, "-c", IMPORT_CODE], env=env, capture_output=True, text=True, check=True)
+        runs.append(round(float(out.stdout.split()[-1]), 4))
+    return {"import_s": min(runs), "runs_s": runs}
+
+
 # ----------------------------------------------------------------- targets
-def target_checks(result: dict) -> list[dict]:
-    """The issue's target ratios from one run's result: name, value, target, passed."""
+def target_checks(result: dict, targets: Targets = Targets()) -> list[dict]:
+    """The issues' targets from one run's result: name, value, op (``>=`` or ``<=``), target, passed."""
     checks = []
 
-    def add(name, value, target):
+    def add(name, value, target, op=">="):
         if value is not None:
-            checks.append({"name": name, "value": round(value, 3), "target": target, "passed": bool(value >= target)})
+            passed = value >= target if op == ">=" else value <= target
+            checks.append({"name": name, "value": round(value, 3), "op": op, "target": target, "passed": bool(passed)})
 
     for town, row in result["towns"].items():
         raw = row["raw_sumo"]["steps_per_s"]
-        add(f"{town} continuous sim steps/s / raw SUMO", row["continuous"]["sim_steps_per_s"] / raw, 0.4)
-        add(f"{town} event sim steps/s / raw SUMO", row["event"]["sim_steps_per_s"] / raw, 0.7)
+        add(f"{town} continuous sim steps/s / raw SUMO", row["continuous"]["sim_steps_per_s"] / raw,
+            targets.continuous_to_raw)
+        add(f"{town} event sim steps/s / raw SUMO", row["event"]["sim_steps_per_s"] / raw, targets.event_to_raw)
     fast = result["highway_env"].get("highway-fast-v0")
     if fast:
         for town, row in result["towns"].items():
-            add(f"{town} event decisions/s / highway-fast-v0", row["event"]["decisions_per_s"] / fast["decisions_per_s"], 10.0)
+            add(f"{town} event decisions/s / highway-fast-v0", row["event"]["decisions_per_s"] / fast["decisions_per_s"],
+                targets.event_to_highway)
             add(f"{town} continuous decisions/s / highway-fast-v0",
-                row["continuous"]["decisions_per_s"] / fast["decisions_per_s"], 5.0)
+                row["continuous"]["decisions_per_s"] / fast["decisions_per_s"], targets.continuous_to_highway)
     scaling = {row["workers"]: row for row in result["scaling"]}
     if 1 in scaling and 2 in scaling:
-        add("2 workers / 1 worker decisions/s", scaling[2]["decisions_per_s"] / scaling[1]["decisions_per_s"], 1.7)
+        add("2 workers / 1 worker decisions/s", scaling[2]["decisions_per_s"] / scaling[1]["decisions_per_s"],
+            targets.two_workers_to_one)
+    if result.get("import"):
+        add("import hbmp_bench [s]", result["import"]["import_s"], targets.import_s, op="<=")
     return checks
 
 
@@ -355,8 +429,9 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
     jobs = [("raw", t, None) for t in cfg.towns] + [("env", t, f) for t in cfg.towns for f in FIDELITIES]
     jobs += [("highway", None, e) for e in (HIGHWAY_ENVS if cfg.highway_seconds > 0 else ())]
     jobs += [("scaling", None, n) for n in cfg.scaling_workers]
+    jobs += [("import", None, cfg.import_repeats)] if cfg.import_repeats else []
     towns: dict[str, dict] = {t: {} for t in cfg.towns}
-    highway, scaling = {}, []
+    highway, scaling, imported = {}, [], {}
     started = time.perf_counter()
     with tqdm(jobs, unit="run", disable=not progress, file=sys.stderr) as bar:
         for kind, town, what in bar:
@@ -367,6 +442,8 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
                 towns[town][what] = measure_env(cfg, town, what)
             elif kind == "highway":
                 highway[what] = measure_highway(what, cfg.highway_seconds)
+            elif kind == "import":
+                imported = measure_import(what)
             else:
                 scaling.append(measure_scaling(cfg, what))
     result = {
@@ -377,6 +454,7 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
         "towns": towns,
         "highway_env": highway,
         "scaling": scaling,
+        "import": imported,
         "bench_process_peak_rss_mb": _peak_rss_mb(),
         "wall_s": round(time.perf_counter() - started, 1),
     }
@@ -384,7 +462,7 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
         raw = row["raw_sumo"]["steps_per_s"]
         for f in FIDELITIES:
             row[f]["ratio_to_raw"] = round(row[f]["sim_steps_per_s"] / raw, 3)
-    result["targets"] = target_checks(result)
+    result["targets"] = target_checks(result, cfg.targets)
     return result
 
 
@@ -408,6 +486,9 @@ def format_table(result: dict) -> str:
     for r in result["scaling"]:
         lines.append(f"{str(r['workers']) + ' worker(s) ' + r['town'] + ' ' + r['fidelity'] + ' random':44s} "
                      f"{r['sim_steps_per_s']:12.1f} {r['decisions_per_s']:12.1f}   peak {r['peak_rss_mb_per_process']} MB/process")
+    if result.get("import"):
+        lines.append(f"{'import hbmp_bench (fresh interpreter, best of ' + str(len(result['import']['runs_s'])) + ')':44s} "
+                     f"{result['import']['import_s']:12.3f} s")
     lines += ["", f"{'latency [ms]':44s} {'median':>12s} {'p95':>12s} {'n':>7s}"]
     for town, row in result["towns"].items():
         for f in FIDELITIES:
@@ -416,7 +497,7 @@ def format_table(result: dict) -> str:
                     lines.append(f"{town + ' ' + f + ' ' + name:44s} {s['median_ms']:12.3f} {s['p95_ms']:12.3f} {s['n']:7d}")
     lines += ["", "targets:"]
     for c in result["targets"]:
-        lines.append(f"  {'PASS' if c['passed'] else 'FAIL'}  {c['name']:48s} {c['value']:8.3f} (>= {c['target']})")
+        lines.append(f"  {'PASS' if c['passed'] else 'FAIL'}  {c['name']:48s} {c['value']:8.3f} ({c['op']} {c['target']})")
     lines.append(f"\nwhole run: {result['wall_s']} s")
     return "\n".join(lines)
 
@@ -441,6 +522,7 @@ def write_json(result: dict, path: str | Path) -> Path:
 
 def profile_continuous(cfg: BenchConfig, town: str, seconds: float, top: int = 25) -> str:
     """cProfile of the continuous env's step path (expert agent) for ``seconds``; top functions by own time."""
+    warm_up_kernels()  # the compile is not the step path
     profiler = cProfile.Profile()
     profiler.enable()
     measure_env(cfg, town, "continuous", seconds=seconds)
@@ -460,13 +542,19 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     if args.out:
         write_json(result, args.out)
     print(json.dumps(result, indent=2) if args.json else format_table(result))
-    return 0
+    return exit_code(result, args.check)
+
+
+def exit_code(result: dict, check: bool) -> int:
+    """0, or with ``check`` 1 when a target of ``result`` failed."""
+    return int(check and not all(c["passed"] for c in result["targets"]))
 
 
 def add_commands(subparsers) -> None:
     p = subparsers.add_parser("bench", help="throughput against raw SUMO and highway-env (a few minutes)")
     p.add_argument("--json", action="store_true", help="print the result as JSON instead of a table")
     p.add_argument("--quick", action="store_true", help="a few seconds per part: checks that everything runs")
+    p.add_argument("--check", action="store_true", help="exit 1 when a target fails (without it: 0 after printing)")
     p.add_argument("--out", default=None, help="also write the JSON result to this file")
     p.add_argument("--profile", type=float, default=0.0, metavar="SECONDS",
                    help="instead: cProfile the continuous env's step path for SECONDS and print the top costs")

@@ -1,10 +1,14 @@
-"""Smoke test of ``hbmp-bench bench --quick``: every part runs and the JSON is complete (no timing asserts)."""
+"""``hbmp-bench bench``: every part runs and the JSON is complete, the planner is compiled before it is
+timed, targets and exit codes follow their parameters (no timing asserts)."""
 
+import dataclasses
 import json
 
 import pytest
 
-from hbmp_bench.bench import BenchConfig, format_table
+import hbmp_bench.planning.executor as executor_module
+from hbmp_bench import bench
+from hbmp_bench.bench import BenchConfig, Targets, exit_code, format_table, target_checks
 from hbmp_bench.cli import main
 
 
@@ -26,16 +30,21 @@ def test_bench_quick_writes_complete_json(tmp_path, capsys):
         assert row["ratio_to_raw"] == pytest.approx(row["sim_steps_per_s"] / raw["steps_per_s"], abs=1e-3)
         assert row["latency"]["sumo_step"]["n"] >= row["sim_steps"]
         assert row["latency"]["occupancy"]["n"] >= row["decisions"]
+        assert row["warm_up_s"] >= 0
     assert town["event"]["sim_steps"] == town["event"]["decisions"]  # one 0.1 s step per event decision
     assert town["continuous"]["latency"]["planner"]["n"] > 0
     assert town["event"]["latency"]["planner"]["n"] == 0
     assert set(written["highway_env"]) == {"highway-fast-v0", "intersection-v0"}
     assert [r["workers"] for r in written["scaling"]] == [1]
     assert written["scaling"][0]["peak_rss_mb_per_process"] > 0
+    imported = written["import"]
+    assert len(imported["runs_s"]) == BenchConfig.quick().import_repeats and imported["import_s"] == min(imported["runs_s"])
     names = [c["name"] for c in written["targets"]]
     assert "Town01 continuous sim steps/s / raw SUMO" in names and "Town01 event decisions/s / highway-fast-v0" in names
-    assert all(c["passed"] == (c["value"] >= c["target"]) for c in written["targets"])
-    assert "targets:" in format_table(written)
+    assert "import hbmp_bench [s]" in names
+    for c in written["targets"]:
+        assert c["passed"] == (c["value"] >= c["target"] if c["op"] == ">=" else c["value"] <= c["target"])
+    assert "targets:" in format_table(written) and "import hbmp_bench" in format_table(written)
 
 
 def test_bench_config_rejects_bad_values():
@@ -45,3 +54,69 @@ def test_bench_config_rejects_bad_values():
         BenchConfig(scaling_workers=(0,))
     with pytest.raises(ValueError):
         BenchConfig(scaling_fidelity="fast")
+    with pytest.raises(ValueError):
+        BenchConfig(import_repeats=-1)
+    with pytest.raises(ValueError):
+        Targets(import_s=float("nan"))
+
+
+def _result(import_s=0.1, continuous=500.0, event=900.0, raw=1000.0):
+    """A result with the fields ``target_checks`` reads."""
+    return {"towns": {"Town01": {"raw_sumo": {"steps_per_s": raw},
+                                 "continuous": {"sim_steps_per_s": continuous, "decisions_per_s": 50.0},
+                                 "event": {"sim_steps_per_s": event, "decisions_per_s": 900.0}}},
+            "highway_env": {}, "scaling": [], "import": {"import_s": import_s, "runs_s": [import_s]}}
+
+
+def test_targets_follow_their_parameters():
+    passed = {c["name"]: c["passed"] for c in target_checks(_result())}
+    assert passed == {"Town01 continuous sim steps/s / raw SUMO": True, "Town01 event sim steps/s / raw SUMO": True,
+                      "import hbmp_bench [s]": True}
+    failing = {c["name"]: c for c in target_checks(_result(), Targets(event_to_raw=0.95, import_s=0.05))}
+    assert not failing["Town01 event sim steps/s / raw SUMO"]["passed"]
+    assert failing["import hbmp_bench [s]"]["op"] == "<=" and not failing["import hbmp_bench [s]"]["passed"]
+    assert failing["Town01 continuous sim steps/s / raw SUMO"]["passed"]
+    assert "import hbmp_bench [s]" not in {c["name"] for c in target_checks({**_result(), "import": {}})}
+
+
+def test_exit_code_is_one_only_with_check_and_a_failed_target():
+    ok, failed = target_checks(_result()), target_checks(_result(), Targets(import_s=0.0))
+    assert exit_code({"targets": ok}, check=False) == 0 and exit_code({"targets": ok}, check=True) == 0
+    assert exit_code({"targets": failed}, check=False) == 0 and exit_code({"targets": failed}, check=True) == 1
+
+
+@pytest.mark.slow
+def test_bench_check_exits_1_on_a_failed_target_and_0_without_check(monkeypatch, capsys):
+    tiny = BenchConfig(towns=("Town01",), raw_steps=20, env_seconds=0.2, highway_seconds=0.0, scaling_workers=(),
+                       import_repeats=1, targets=Targets(import_s=0.0))  # no import takes 0 s: that target fails
+    monkeypatch.setattr(BenchConfig, "quick", classmethod(lambda cls: tiny))
+    assert main(["bench", "--quick", "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert "import hbmp_bench [s]" in [c["name"] for c in result["targets"] if not c["passed"]]
+    assert main(["bench", "--quick", "--json", "--check"]) == 1
+
+
+@pytest.mark.slow
+def test_planner_is_compiled_before_the_first_timed_call(monkeypatch):
+    from hbmp_bench.planning import rollout
+
+    events = []
+    warm_up = bench.warm_up_kernels
+
+    def recorded_warm_up():
+        seconds = warm_up()
+        events.append(("warm-up", len(rollout.roll_out.signatures)))
+        return seconds
+
+    def recorded_plan(*args, **kwargs):
+        events.append(("plan", len(rollout.roll_out.signatures)))  # compiled signatures when this timed call starts
+        return plan(*args, **kwargs)
+
+    plan = executor_module.plan
+    monkeypatch.setattr(bench, "warm_up_kernels", recorded_warm_up)
+    monkeypatch.setattr(executor_module, "plan", recorded_plan)  # the bench times what it finds there
+    row = bench.measure_env(dataclasses.replace(BenchConfig.quick(), env_seconds=0.5), "Town01", "continuous")
+    (first, compiled), timed = events[0], events[1:]
+    assert first == "warm-up" and compiled >= 1
+    assert timed and len(timed) == row["latency"]["planner"]["n"]
+    assert {n for _, n in timed} == {compiled} == {len(rollout.roll_out.signatures)}  # no timed call compiled
