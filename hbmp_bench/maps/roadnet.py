@@ -255,32 +255,39 @@ class RoadNetwork:
         return tuple(sorted({c.from_lane for c in self.links(edge, to_edge)}))
 
     def route_lanes(self, route: tuple[str, ...], goal_lane: str, goal_pos: float | None = None,
-                    room_m: float = 20.0, cutoff_m: float = LANE_CHANGE_CUTOFF_M) -> tuple[frozenset[str], ...]:
-        """Per edge of ``route``, the lanes from which the car can drive on to ``goal_lane`` (on the
-        last edge: the goal lane itself).
+                    change_m: float = 20.0, change_s: float = 3.0,
+                    cutoff_m: float = LANE_CHANGE_CUTOFF_M) -> tuple[frozenset[str], ...]:
+        """Per edge of ``route``, the lanes a car can leave that edge by and still reach ``goal_lane``
+        (on the last edge: the goal lane itself).
 
-        A lane change needs ``room_m`` [m] of an edge: its length less the last ``cutoff_m`` [m]
-        before the junction where lane changes are closed, or on the goal edge the goal's position
-        ``goal_pos`` [m] (None: the goal edge's room like any edge's). Before an edge with that
-        room these are the lanes that link onto it at all; before an edge without (a short goal
-        edge, a roundabout's ring segment) the car must already be in a lane whose link lands on
-        one of that edge's good lanes. Where no lane does, any linking lane is kept.
+        One lane change takes ``max(change_m, change_s * speed limit)`` [m] of an edge's room: its
+        length less the last ``cutoff_m`` [m] before the junction where lane changes are closed, or
+        on the goal edge the goal's position ``goal_pos`` [m] (None: the goal edge's room like any
+        edge's). Entering an edge, the car can reach the edge's good lanes from a lane at most
+        room / change lanes away; the good lanes of the edge before are those that link onto
+        such a lane (a short goal edge or a roundabout's ring segment allows none: the car must
+        arrive in the right lane; several lanes to cross on a fast road need a long edge). Where
+        no lane qualifies, every lane that links on is kept.
         """
-        return self._route_lanes(tuple(route), goal_lane, goal_pos, float(room_m), float(cutoff_m))
+        return self._route_lanes(tuple(route), goal_lane, goal_pos, float(change_m), float(change_s), float(cutoff_m))
 
     @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
-    def _route_lanes(self, route: tuple[str, ...], goal_lane: str, goal_pos: float | None, room_m: float,
-                     cutoff_m: float) -> tuple[frozenset[str], ...]:
+    def _route_lanes(self, route: tuple[str, ...], goal_lane: str, goal_pos: float | None, change_m: float,
+                     change_s: float, cutoff_m: float) -> tuple[frozenset[str], ...]:
         good = [frozenset({goal_lane})]
         for k in range(len(route) - 2, -1, -1):
             edge, to_edge = route[k], route[k + 1]
             last = k + 1 == len(route) - 1
             room = goal_pos if last and goal_pos is not None else self.edge_length[to_edge] - cutoff_m
+            targets = [self.lanes[ln].index for ln in good[-1]]
             links = self.links(edge, to_edge)
-            lanes = frozenset(c.from_lane for c in links)
-            if room < room_m:
-                lanes = frozenset(c.from_lane for c in links if c.to_lane in good[-1]) or lanes
-            good.append(lanes)
+            reach = []
+            for c in links:
+                to_lane = self.lanes[c.to_lane]
+                changes = min(abs(to_lane.index - t) for t in targets)
+                reach.append(changes * max(change_m, change_s * to_lane.speed) <= max(room, 0.0))
+            good.append(frozenset(c.from_lane for c, ok in zip(links, reach) if ok)
+                        or frozenset(c.from_lane for c in links))
         return tuple(reversed(good))
 
     def neighbour_lane(self, lane_id: str, side: int) -> str | None:

@@ -114,10 +114,23 @@ def test_route_lanes_reach_a_goal_lane_that_leaves_no_room_to_change():
     assert good[-1] == {goal}
     assert good[1] == {"-I90_130_AW_1"} and good[0] == {"-AW_X90_235_1"}
     assert len(net.lanes_to(route[0], route[1])) == 2  # both lanes link on: the rule, not the map, narrows them
-    # a goal far enough along a long goal edge leaves room to change lanes there
+    # a goal far enough along the goal edge leaves room to change lanes there: one change takes
+    # max(20 m, 3 s at the 13.9 m/s limit) by default, 20 m when changes take 1 s
     route = ("-X230_235_Pr235", "-I195_235_X230_235", "-AN_I195_235", "-X90_235_AN", "-I45_235_X90_235")
-    assert net.route_lanes(route, "-I45_235_X90_235_1", goal_pos=25.0)[3] == set(net.lanes_to(route[3], route[4]))
-    assert net.route_lanes(route, "-I45_235_X90_235_1", goal_pos=10.85)[3] == {"-X90_235_AN_1"}
+    assert net.route_lanes(route, "-I45_235_X90_235_1", goal_pos=25.0, change_s=1.0)[3] == set(net.lanes_to(route[3], route[4]))
+    assert net.route_lanes(route, "-I45_235_X90_235_1", goal_pos=25.0)[3] == {"-X90_235_AN_1"}
+    assert net.route_lanes(route, "-I45_235_X90_235_1", goal_pos=10.85, change_s=1.0)[3] == {"-X90_235_AN_1"}
     # the lanes a car drives (and so the route length) follow the same rule
     path = net.route_path(route, "-X230_235_Pr235_2", "-I45_235_X90_235_1", 10.85)
     assert "-X90_235_AN_1" in path.lanes and "-X90_235_AN_2" not in path.lanes
+
+
+def test_route_lanes_cross_several_lanes_of_a_fast_road_in_time():
+    """Town04's 4-lane motorway at 25 m/s: a lane change takes 75 m, so a goal on the rightmost lane
+    96 m into its edge is reached from at most one lane away; the edge before must be left by
+    the two rightmost lanes (each links straight on)."""
+    net = road_network("Town04")
+    route = ("Kout_W_Dout_S", "Dout_S_Mout_S")
+    good = net.route_lanes(route, "Dout_S_Mout_S_0", goal_pos=96.18)
+    assert good == (frozenset({"Kout_W_Dout_S_0", "Kout_W_Dout_S_1"}), frozenset({"Dout_S_Mout_S_0"}))
+    assert len(net.lanes_to(*route)) == 4
