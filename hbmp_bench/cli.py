@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import dis
 import importlib
 import json
+import os
 import sys
+import sysconfig
 
-from hbmp_bench.errors import UnknownNameError
+from hbmp_bench.errors import Interrupted, UnknownNameError, UserError
 
 COMMAND_MODULES: tuple[str, ...] = ("hbmp_bench.render.commands", "hbmp_bench.transfer.commands",
                                     "hbmp_bench.evaluation.commands", "hbmp_bench.training.commands", "hbmp_bench.bench")
@@ -130,13 +133,65 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+EXIT_USER_ERROR = 2
+"""Exit code of a user error (as argparse's own)."""
+EXIT_INTERRUPTED = 130
+"""Exit code after Ctrl-C (128 + SIGINT, as a shell reports it)."""
+
+_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep
+_STDLIB_DIR = os.path.abspath(sysconfig.get_paths()["stdlib"]) + os.sep
+_LIBRARY_DIRS = (os.sep + "site-packages" + os.sep, os.sep + "dist-packages" + os.sep)
+
+
+def is_user_error(exc: BaseException) -> bool:
+    """Whether ``exc`` is a mistake in the user's input (one line, no traceback) rather than a bug.
+
+    ``UserError`` (and so ``UnknownNameError``) and ``FileNotFoundError`` are. A plain ``ValueError``
+    is when the standard library raised it (a JSON file that does not parse) or a ``raise``
+    statement of this package did (configuration is validated with ``ValueError``). One raised
+    inside numpy, torch or another library, or by a failing call in this package
+    (``array.reshape``), is a bug and keeps its traceback.
+    """
+    if isinstance(exc, (UserError, FileNotFoundError)):
+        return True
+    if not isinstance(exc, ValueError) or exc.__traceback__ is None:
+        return False
+    tb = exc.__traceback__
+    while tb.tb_next is not None:
+        tb = tb.tb_next
+    code = tb.tb_frame.f_code
+    where = os.path.abspath(code.co_filename)
+    if not where.startswith(_PACKAGE_DIR):
+        if any(d in where for d in _LIBRARY_DIRS):
+            return False
+        if where.startswith(_STDLIB_DIR):
+            return True
+    return any(i.offset == tb.tb_lasti and i.opname == "RAISE_VARARGS" for i in dis.get_instructions(code))
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split()) or "(no message)"
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run ``hbmp-bench``; returns its exit code.
+
+    A user error prints ``hbmp-bench: error: <what is wrong>`` on one line (exit 2). Ctrl-C stops
+    the command cleanly and prints ``hbmp-bench: interrupted`` with how to resume (exit 130).
+    Anything else is a bug and shows its traceback.
+    """
     try:
+        args = build_parser().parse_args(argv)
         return args.func(args)
-    except (UnknownNameError, ValueError, FileNotFoundError) as exc:
-        print(f"hbmp-bench: error: {exc}", file=sys.stderr)
-        return 2
+    except KeyboardInterrupt as exc:
+        detail = _one_line(str(exc)) if isinstance(exc, Interrupted) else ""
+        print(f"hbmp-bench: interrupted{': ' + detail if detail else ''}", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except Exception as exc:
+        if not is_user_error(exc):
+            raise
+        print(f"hbmp-bench: error: {_one_line(str(exc))}", file=sys.stderr)
+        return EXIT_USER_ERROR
 
 
 if __name__ == "__main__":

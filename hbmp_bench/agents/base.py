@@ -6,7 +6,7 @@ import importlib
 from collections.abc import Callable
 from typing import Any, Protocol, runtime_checkable
 
-from hbmp_bench.errors import UnknownNameError
+from hbmp_bench.errors import UnknownNameError, UserError, raised_at
 
 
 @runtime_checkable
@@ -41,7 +41,15 @@ def register_agent(name: str) -> Callable[[Callable[..., Agent]], Callable[..., 
 
 def load_agent(spec: str, **kwargs: Any) -> Agent:
     """An agent from a registry name (``expert``), a ``module:Class`` plug-in path, or a trained
-    checkpoint file (a path ending in ``.pt``, see :mod:`hbmp_bench.agents.learned`)."""
+    checkpoint file (a path ending in ``.pt``, see :mod:`hbmp_bench.agents.learned`).
+
+    Raises:
+        UnknownNameError: ``spec`` is none of these.
+        UserError: the plug-in's module does not import, lacks the attribute, raises while it is
+            built, or builds no ``Agent`` (the plug-in's own exception is the ``__cause__``); or
+            the checkpoint cannot be used (``CheckpointError``).
+        FileNotFoundError: no checkpoint file at ``spec``.
+    """
     if spec in AGENTS:
         return AGENTS[spec](**kwargs)
     if spec.endswith(".pt"):
@@ -49,13 +57,33 @@ def load_agent(spec: str, **kwargs: Any) -> Agent:
 
         return LearnedAgent(spec, **kwargs)
     if ":" in spec:
-        module_name, _, attr = spec.partition(":")
-        try:
-            factory = getattr(importlib.import_module(module_name), attr)
-        except (ImportError, AttributeError) as exc:
-            raise ValueError(f"cannot load agent {spec!r}: {exc}") from exc
-        agent = factory(**kwargs)
-        if not isinstance(agent, Agent):
-            raise TypeError(f"{spec} does not implement the Agent protocol (name, reset(info), act(observation, info))")
-        return agent
+        return _load_plugin(spec, **kwargs)
     raise UnknownNameError("agent", spec, [*AGENTS, "<module:Class>", "<path/to/checkpoint.pt>"])
+
+
+def _load_plugin(spec: str, **kwargs: Any) -> Agent:
+    """Build a ``module:Class`` agent; whatever the user's code raises becomes one ``UserError``."""
+    module_name, _, attr = spec.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise UserError(f"cannot load agent {spec!r}: {exc}") from exc
+    except Exception as exc:  # noqa: BLE001 - the plug-in module's own code failed
+        raise UserError(f"cannot load agent {spec!r}: importing {module_name} raised {_described(exc)}") from exc
+    try:
+        factory = getattr(module, attr)
+    except AttributeError as exc:
+        raise UserError(f"cannot load agent {spec!r}: {exc}") from exc
+    try:
+        agent = factory(**kwargs)
+    except Exception as exc:  # noqa: BLE001 - the plug-in's constructor failed
+        raise UserError(f"cannot load agent {spec!r}: {attr}() raised {_described(exc)}") from exc
+    if not isinstance(agent, Agent):
+        raise UserError(f"cannot load agent {spec!r}: {type(agent).__name__} does not implement the Agent protocol "
+                        "(name, reset(info), act(observation, info))")
+    return agent
+
+
+def _described(exc: BaseException) -> str:
+    where = "" if isinstance(exc, SyntaxError) else raised_at(exc)  # a SyntaxError names its file and line
+    return f"{type(exc).__name__}: {exc}" + (f" (at {where})" if where else "")

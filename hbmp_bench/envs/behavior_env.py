@@ -28,7 +28,7 @@ class BehaviorEnv(gym.Env):
     ## Action space
     ``Discrete(5)``, the paper's order: 0 speed_up, 1 speed_down, 2 change_left, 3 change_right,
     4 keep. A behavior infeasible for R_t (no lane on that side) is executed as keep;
-    ``info["action_mask"]`` marks the feasible ones. An action outside 0..4 raises ValueError.
+    ``info["action_mask"]`` marks the feasible ones. An action outside 0..4, or a bool, raises ValueError.
 
     ## Observation space
     ``Dict(occupancy=Box(0, 1, (1, rows, cols), float32), road=Box(0, 2, (10,), float32))``:
@@ -55,7 +55,8 @@ class BehaviorEnv(gym.Env):
     random_goals: ignore the suite list and draw a fresh start and goal every reset (training).
     fidelity, reward, decision_period_s: see :class:`WorldConfig` (None: its defaults).
     observation: ``deformed`` or ``vehicle_centric`` M_t; grid options via ``observation_config``.
-    density: override background traffic (``empty``, ``corl``, ``regular``, ``dense``).
+    density: override background traffic (``empty``, ``corl``, ``regular``, ``dense``); another
+        value raises ValueError here.
 
     ## Version history
     v0: first release.
@@ -85,6 +86,9 @@ class BehaviorEnv(gym.Env):
         self.suite = get_suite(suite)
         self.random_goals = random_goals
         self.density = density
+        self.traffic = None if density is None else traffic_for(self.town, self.task, density)
+        """The background traffic ``density`` sets for every episode (None: each episode's own);
+        an unknown density fails here, before any simulation starts."""
         obs_cfg = observation_config or ObservationConfig(kind=observation)
         fidelity = WorldConfig.fidelity if fidelity is None else fidelity
         self.config = WorldConfig(fidelity=fidelity, reward=reward, decision_period_s=decision_period_s,
@@ -140,7 +144,7 @@ class BehaviorEnv(gym.Env):
     def _pick_episode(self, options: dict | None):
         opts = options or {}
         if self.random_goals:
-            traffic = traffic_for(self.town, self.task, self.density)
+            traffic = self.traffic if self.traffic is not None else traffic_for(self.town, self.task, None)
             seed = int(self.np_random.integers(2**31))
             return sample_episode(self.town, "Navigation" if self.task == "NavigationDynamic" else self.task,
                                   np.random.default_rng(seed), suite=self.suite, index=0, seed=seed, traffic=traffic)
@@ -148,10 +152,10 @@ class BehaviorEnv(gym.Env):
         if index is None:
             index = int(self.np_random.integers(len(self.episodes)))
         episode = self.episodes[index]
-        if self.density is not None:
+        if self.traffic is not None:
             import dataclasses
 
-            episode = dataclasses.replace(episode, traffic=traffic_for(self.town, self.task, self.density))
+            episode = dataclasses.replace(episode, traffic=self.traffic)
         return episode
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -167,8 +171,10 @@ class BehaviorEnv(gym.Env):
     def step(self, action):
         if not self._running:
             raise RuntimeError("call reset() before step() (and again after an episode ends)")
-        if not self.action_space.contains(action) and not (isinstance(action, (int, np.integer)) and 0 <= int(action) < 5):
-            raise ValueError(f"action must be an int in [0, {len(BEHAVIORS)}) ({', '.join(BEHAVIORS)}), got {action!r}")
+        if isinstance(action, (bool, np.bool_)) or not (
+                self.action_space.contains(action) or isinstance(action, (int, np.integer)) and 0 <= int(action) < 5):
+            raise ValueError(f"action must be an int in [0, {len(BEHAVIORS)}) ({', '.join(BEHAVIORS)}), "
+                             f"got {type(action).__name__} {action!r}")
         self._last_behavior = BEHAVIORS[int(action)]
         obs, reward, terminated, truncated, info = self.world.step(int(action))
         if terminated or truncated:

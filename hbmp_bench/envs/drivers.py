@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hbmp_bench.envs.observation import followed_path
-from hbmp_bench.maps.roadnet import RoadNetwork
+from hbmp_bench.maps.roadnet import LANE_CHANGE_CUTOFF_M, RoadNetwork
 from hbmp_bench.planning import (BehaviorConfig, BehaviorExecutor, Control, ExecutorConfig, Obstacles, PlannerConfig,
                                  PlanResult, ReferencePaths, VehicleParams, reference_speed)
 from hbmp_bench.planning import VehicleState as ModelState
@@ -36,10 +36,6 @@ SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = range(5)
 FIDELITIES = ("event", "continuous")
 
 
-LANE_CHANGE_CUTOFF_M = 10.0
-"""No lane change starts within this distance of a lane's end [m]: the last metres before a
-junction (solid lines in real towns); a change begun there would enter the junction on another
-lane's connection."""
 
 
 def feasible_behaviors(net: RoadNetwork, lane_id: str, lane_pos: float | None = None) -> np.ndarray:

@@ -30,7 +30,7 @@ import dataclasses
 import numpy as np
 
 from hbmp_bench.envs.drivers import ContinuousDriver, EventDriver, feasible_behaviors
-from hbmp_bench.envs.world import BEHAVIORS, EGO_ID, DrivingWorld, WorldConfig, accumulate, terminal_reward
+from hbmp_bench.envs.world import BEHAVIORS, EGO_ID, DrivingWorld, WorldConfig, accumulate, followed_stop_line, terminal_reward
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents
 from hbmp_bench.scenarios import Episode
 from hbmp_bench.sim.sumo import BACKGROUND_TYPE, Actors
@@ -129,12 +129,11 @@ class BackgroundAgent:
             self.followed_lane = state.lane
         self.light = sim.light_ahead(self.id)
         self.actors = snapshot.without(self.id)
-        a = self.actors
-        light = None if self.light is None else (self.light.tls, self.light.link_index, self.light.distance,
-                                                 self.light.state)
+        a, lane = self.actors, self.followed_lane
         ev = self.detector.update(
-            EgoFrame(self.state.xy, self.state.yaw, BACKGROUND_TYPE.length, BACKGROUND_TYPE.width, light,
-                     net.lanes[state.lane].edge if state.lane in net.lanes else ""),
+            EgoFrame(self.state.xy, self.state.yaw, BACKGROUND_TYPE.length, BACKGROUND_TYPE.width,
+                     followed_stop_line(sim, self.world.locator, lane, next(iter(self._next_edges(1)), None)),
+                     net.lanes[lane].edge if lane in net.lanes else ""),
             a.ids, a.xy, a.yaw, a.length, a.width, a.is_pedestrian, sim.time,
         )
         if ev.collisions:

@@ -13,7 +13,8 @@ pedestrian footprint covers it.
 R_t (``ROAD_FEATURES``, 10 entries, in the paper's order):
   e_l, e_r       1 if a drivable lane exists left / right of the ego's lane (0 inside a junction)
   a_l, a_c, a_r  1 if the left / current / right lane continues the route (links to the next route
-                 edge; on the goal edge: is the goal lane); 0 otherwise or if absent
+                 edge, and in time for the goal lane: see ``RoadNetwork.route_lanes``; on the goal
+                 edge: is the goal lane); 0 otherwise or if absent
   l_g, l_y, l_r  one-hot state of the traffic light at the end of the current lane (all 0: none)
   d_s            distance to the stop line (end of the current lane) / lane length, in [0, 1]
   dv             speed / speed limit, clipped to [0, 2]
@@ -173,14 +174,16 @@ def occupancy_grid(cfg: ObservationConfig, ego_xy: np.ndarray, ego_yaw: float, p
 
 
 def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[str, ...], route_index: int,
-                 goal_lane: str, speed: float, light: tuple[str, int, float, str] | None) -> tuple[np.ndarray, dict]:
+                 goal_lane: str, speed: float, light: tuple[str, int, float, str] | None,
+                 goal_pos: float | None = None) -> tuple[np.ndarray, dict]:
     """R_t (10,) float32 and the quantities it was made of (metres, m/s) for privileged users.
 
     Args:
         lane_id / lane_pos: the ego's lane and front-bumper position on it [m].
         route / route_index: the episode route and the index of the ego's edge (or of the edge
             before the junction it is crossing).
-        goal_lane: the lane the goal lies on.
+        goal_lane / goal_pos: the lane the goal lies on and its position on it [m] (None: no fixed
+            goal point, e.g. circulating traffic).
         speed: ego speed [m/s].
         light: next traffic light on the route as (tls, link index, distance [m], state) or None.
     """
@@ -200,7 +203,7 @@ def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[s
         next_edge = route[route_index + 1] if route_index + 1 < len(route) else None
         if next_edge is not None and net.links(lane.edge, next_edge):
             scene["turn_ahead"] = net.direction(lane.edge, next_edge)
-        good = set(net.lanes_to(lane.edge, next_edge)) if next_edge else {goal_lane}
+        good = net.route_lanes(route, goal_lane, goal_pos)[route_index]
         ids = net.edge_lanes[lane.edge]
         here = ids.index(lane_id)
         left = ids[here + 1] if here + 1 < len(ids) else None

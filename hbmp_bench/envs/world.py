@@ -16,7 +16,7 @@ from hbmp_bench.envs.drivers import FIDELITIES, LANE_CHANGE_CUTOFF_M, Continuous
 from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, road_profile
 from hbmp_bench.maps import net_path
 from hbmp_bench.maps.roadnet import RoadNetwork
-from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents
+from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents, StopLine
 from hbmp_bench.metrics.geometry import LaneLocator
 from hbmp_bench.metrics.records import EpisodeRecord, driving_score
 from hbmp_bench.planning.behaviors import BehaviorConfig
@@ -318,10 +318,11 @@ class DrivingWorld:
         self._update_progress(state)
         self._light = self.sim.light_ahead(EGO_ID)
         actors = snapshot.without(EGO_ID)
+        lane = self._followed_lane
         ev = self.detector.update(
             EgoFrame(state.xy, state.yaw, EGO_TYPE.length, EGO_TYPE.width,
-                     None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance, self._light.state),
-                     self.net.lanes[state.lane].edge if state.lane in self.net.lanes else ""),
+                     followed_stop_line(self.sim, self.locator, lane, next(iter(self._next_edges(1)), None)),
+                     self.net.lanes[lane].edge if lane in self.net.lanes else ""),
             actors.ids, actors.xy, actors.yaw, actors.length, actors.width, actors.is_pedestrian, self.sim.time,
         )
         self._actors = actors
@@ -337,18 +338,33 @@ class DrivingWorld:
         return ev
 
     def _update_progress(self, state) -> None:
-        """Progress [m] = route length − distance still to drive along the current route."""
-        k = self._route_pos.get(self.net.lane(state.lane).edge) if state.lane in self.net.lanes else None
-        if k is None:
+        """Progress [m] = route length − distance still to drive along the current route's lanes,
+        junction lanes included (``RoutePath``). On a route edge the front bumper's lane position
+        counts; inside the junction after the followed lane's edge, the front bumper's projection
+        on the route's junction lanes, so progress runs on through a junction without a jump."""
+        path = self._route_path
+        if state.lane in self.net.lanes:
+            k = self._route_pos.get(self.net.lanes[state.lane].edge)
+            if k is None:
+                return
+            at = path.position(k, state.lane_pos)
+        elif state.lane in self.net.internal_lanes and self._followed_lane in self.net.lanes:
+            k = self._route_pos.get(self.net.lanes[self._followed_lane].edge)
+            if k is None or k + 1 >= len(self.route):
+                return
+            front = state.xy + EGO_TYPE.length / 2 * np.array([np.cos(state.yaw), np.sin(state.yaw)])
+            at = path.junction_position(k, front)
+        else:
             return
-        remaining = self._route_offsets[-2] + self.episode.goal_pos - (self._route_offsets[k] + state.lane_pos)
+        remaining = path.position(len(self.route) - 1, self.episode.goal_pos) - at
         progress = self.episode.route_length_m - remaining
         if progress <= self.episode.route_length_m + 5.0:
             self.progress_m = max(self.progress_m, min(progress, self.episode.route_length_m))
 
     def _set_route(self, route: tuple[str, ...]) -> None:
         self.route = tuple(route)
-        self._route_offsets = np.concatenate([[0.0], np.cumsum([self.net.edge_length[e] for e in self.route])])
+        self._route_path = self.net.route_path(self.route, self.episode.start_lane, self.episode.goal_lane,
+                                               self.episode.goal_pos)
         self._route_pos = {e: i for i, e in enumerate(self.route)}
 
     def _keep_route_reachable(self) -> None:
@@ -390,7 +406,8 @@ class DrivingWorld:
         ego, ep = self._ego, self.episode
         route_index = self._route_index()
         light = None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance, self._light.state)
-        road, scene = road_profile(self.net, ego.lane, ego.lane_pos, self.route, route_index, ep.goal_lane, ego.speed, light)
+        road, scene = road_profile(self.net, ego.lane, ego.lane_pos, self.route, route_index, ep.goal_lane, ego.speed, light,
+                                   ep.goal_pos)
         actors = self._actors
         occupancy = self.observer.occupancy(
             ego.xy, ego.yaw, self._followed_lane or ego.lane, self.route[route_index + 1: route_index + 4],
@@ -463,6 +480,19 @@ def terminal_reward(ev: StepEvents, timed_out: bool = False) -> float:
         + r["wrong_lane"] * ev.wrong_lane
         + r["off_road"] * ev.off_road
     )
+
+
+def followed_stop_line(sim: SumoSim, locator: LaneLocator, lane: str, next_edge: str | None) -> StopLine | None:
+    """The signalised stop line at the end of the followed ``lane`` on the way to the route's
+    ``next_edge``, with its link's signal now (None where that link has no traffic light).
+
+    The detectors judge red lights on it: the lane and route the vehicle follows, not the light
+    ahead that SUMO's map matching of a pushed pose reports."""
+    fixed = locator.stop_line(lane, next_edge)
+    if fixed is None:
+        return None
+    ends, direction, tls, link_index = fixed
+    return StopLine(lane, ends, direction, sim.light_state(tls, link_index))
 
 
 def accumulate(total: StepEvents, ev: StepEvents) -> None:

@@ -6,7 +6,8 @@
 - ``run_job`` (in this process) / ``run_jobs`` (isolated): quick runs of a few episodes.
 """
 
-from hbmp_bench.evaluation.evaluate import BACKENDS, EvaluationResult, evaluate, iter_outcomes, records_path
+from hbmp_bench.evaluation.evaluate import (BACKENDS, EvaluationInterrupted, EvaluationResult, evaluate, iter_outcomes,
+                                            records_path)
 from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool
 from hbmp_bench.evaluation.runner import Job, run_job, run_jobs
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, agent_slug, default_fidelity, suite_tasks
@@ -16,6 +17,7 @@ __all__ = [
     "EpisodeOutcome",
     "EpisodePool",
     "EpisodeTask",
+    "EvaluationInterrupted",
     "EvaluationResult",
     "Job",
     "RunnerLimits",

@@ -26,7 +26,12 @@ def _missing_extra_is_user_error(func):
 def _limits(args: argparse.Namespace):
     from hbmp_bench.evaluation.tasks import RunnerLimits
 
-    return RunnerLimits(decision_timeout_s=args.decision_timeout, watchdog_s=args.watchdog)
+    def unless_0(value):
+        return None if value == 0 else value
+
+    return RunnerLimits(decision_timeout_s=args.decision_timeout, watchdog_s=args.watchdog,
+                        agent_memory_mb=unless_0(args.agent_memory_mb), agent_cpu_s=unless_0(args.agent_cpu_s),
+                        agent_user=args.agent_user or None)
 
 
 def _add_selection(p: argparse.ArgumentParser, agent_default: str | None) -> None:
@@ -44,6 +49,16 @@ def _add_selection(p: argparse.ArgumentParser, agent_default: str | None) -> Non
     p.add_argument("--address", default=None, help="Ray cluster address; default: a local Ray instance")
     p.add_argument("--decision-timeout", type=float, default=10.0, help="seconds per agent decision [s]")
     p.add_argument("--watchdog", type=float, default=120.0, help="seconds without simulation progress [s]")
+    from hbmp_bench.evaluation.tasks import RunnerLimits
+
+    default = RunnerLimits()
+    p.add_argument("--agent-memory-mb", type=int, default=default.agent_memory_mb,
+                   help=f"address space of the agent process [MiB] (default {default.agent_memory_mb}; 0: no limit)")
+    p.add_argument("--agent-cpu-s", type=int, default=default.agent_cpu_s,
+                   help=f"CPU time of the agent process per episode [s] (default {default.agent_cpu_s}; 0: no limit)")
+    p.add_argument("--agent-user", default=default.agent_user,
+                   help=f"when run as root, the unprivileged user the agent process runs as (default "
+                        f"{default.agent_user}); '' keeps root: only for trusted agents")
     p.add_argument("--json", action="store_true", help="print a JSON summary (no progress bar)")
 
 
@@ -57,7 +72,8 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
                       fidelity=args.fidelity, out_dir=args.out, workers=args.workers, backend=args.backend,
                       address=args.address, limits=_limits(args), progress=not args.json)
     summary = {"records": str(result.path), "ran": result.ran, "skipped": result.skipped,
-               "missing": result.missing, "wall_s": round(result.wall_s, 2), **summarize(result.records)}
+               "missing": result.missing, "wall_s": round(result.wall_s, 2), "sim_errors": result.sim_errors,
+               "agent_errors": result.agent_errors, **summarize(result.records)}
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0

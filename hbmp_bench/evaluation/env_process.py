@@ -1,14 +1,21 @@
 """The env process of an episode pool slot: it owns the simulation and asks the agent process for actions.
 
-Protocol with the pool (tuples on one duplex pipe):
-    pool → env  ``("run", EpisodeTask)`` or ``("stop", None)``;
+Protocol with the pool (tuples on one duplex pipe; the pool is trusted):
+    pool → env  ``("run", EpisodeTask)`` followed by the descriptor of a fresh agent channel
+                (``multiprocessing.reduction.send_handle``), or ``("stop", None)``;
     env → pool  ``("beat", None)`` once started, then while an episode makes progress or waits
                 for the agent (about every 0.5 s), then ``("done", outcome dict)``.
 
-Every episode ends with exactly one ``done``: a finished episode, an ``agent_error`` (the agent
-raised, hung past ``decision_timeout_s``, died, or sent an invalid action) or a ``sim_error``
-(the env raised). After an error the outcome asks the pool to restart the slot (both processes),
-so a hung agent or a broken SUMO never serves the next episode.
+The agent channel is data only from the agent's side (see ``channel``): nothing the agent
+process sends is ever unpickled here.
+
+Every episode ends with exactly one ``done``: a finished episode, an ``agent_error`` or a
+``sim_error`` (the env raised). ``agent_error`` covers everything the agent does wrong: it
+raised, hung past ``decision_timeout_s``, died, closed its channel, stopped reading it, sent a
+reply that is malformed, oversized or unsolicited, or an action outside the action space. Such
+an episode is a failure (success false, driving score 0) that counts in every table. After a
+``sim_error`` the outcome asks the pool to restart the slot, so a broken SUMO never serves the
+next episode.
 """
 
 from __future__ import annotations
@@ -17,11 +24,14 @@ import dataclasses
 import importlib
 import time
 import traceback
+from multiprocessing import reduction
 from multiprocessing.connection import Connection
 from typing import Any
 
 import numpy as np
 
+from hbmp_bench.evaluation import channel
+from hbmp_bench.evaluation.sandbox import protect_process
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, adopt_environment, watch_lifeline
 from hbmp_bench.metrics.records import AGENT_ERROR, DECISION_CAP, SIM_ERROR, EpisodeRecord
 
@@ -30,7 +40,7 @@ BEAT_PERIOD_S = 0.5
 
 
 class AgentFailure(Exception):
-    """The agent process raised, timed out, died or answered nonsense; the message says which."""
+    """The agent process raised, timed out, died or broke the channel's protocol; the message says which."""
 
 
 def build_env(task: EpisodeTask, factory: str | None, env_kwargs: dict | None = None):
@@ -48,7 +58,8 @@ def build_env(task: EpisodeTask, factory: str | None, env_kwargs: dict | None = 
 def _valid_action(space, action) -> bool:
     """``action`` (int or tuple of floats from the agent process) belongs to ``space``."""
     if isinstance(action, int):
-        return hasattr(space, "n") and 0 <= action < int(space.n)
+        start = int(getattr(space, "start", 0))
+        return hasattr(space, "n") and start <= action < start + int(space.n)
     if isinstance(action, tuple) and hasattr(space, "shape") and not hasattr(space, "n"):
         array = np.asarray(action, dtype=space.dtype)
         return array.shape == space.shape and bool(space.contains(array))
@@ -75,53 +86,52 @@ def blank_record(task: EpisodeTask, end_reason: str, error: str) -> EpisodeRecor
 
 
 def partial_record(env: Any, task: EpisodeTask, end_reason: str, error: str) -> EpisodeRecord:
-    """The record of a started episode cut short: what the world measured so far, never a success."""
+    """The record of a started episode cut short: what the world measured so far (route
+    completion, infractions, distance), never a success; an ``agent_error`` scores 0."""
     world = getattr(getattr(env, "unwrapped", env), "world", None)
     if world is None or getattr(world, "episode", None) is None:
         return blank_record(task, end_reason, error)
     record = world.record(task.agent)
-    return dataclasses.replace(record, success=False, timeout=False, end_reason=end_reason, error=error)
+    score = 0.0 if end_reason == AGENT_ERROR else record.driving_score
+    return dataclasses.replace(record, success=False, timeout=False, driving_score=score, end_reason=end_reason,
+                               error=error)
 
 
 class _AgentLink:
-    """The env side of the agent pipe, with timeouts on every answer; ``beat`` is called while
-    waiting so the pool's watchdog sees the env process alive."""
+    """The env side of one episode's agent channel: every answer has a timeout, and ``beat`` is
+    called while waiting so the pool's watchdog sees the env process alive."""
 
-    def __init__(self, conn: Connection, limits: RunnerLimits, beat):
-        self.conn = conn
+    def __init__(self, end: channel.EnvEnd, limits: RunnerLimits):
+        self.end = end
         self.limits = limits
-        self.beat = beat
-        self.ready = False
 
-    def _receive(self, timeout_s: float, what: str) -> tuple[str, Any]:
-        deadline = time.monotonic() + timeout_s
+    def _exchange(self, message: tuple | None, expected: str, timeout_s: float, what: str) -> Any:
         try:
-            while not self.conn.poll(min(BEAT_PERIOD_S, max(deadline - time.monotonic(), 0.0))):
-                if time.monotonic() >= deadline:
-                    raise AgentFailure(f"agent did not answer {what} within {timeout_s:g} s (hung or too slow); "
-                                       "the agent process was stopped")
-                self.beat()
-            return self.conn.recv()
-        except (EOFError, OSError, BrokenPipeError) as exc:
-            raise AgentFailure(f"agent process exited during {what} ({type(exc).__name__})") from None
+            if message is not None:
+                self.end.request(message, timeout_s)
+            reply = self.end.reply(timeout_s)
+        except channel.ChannelTimeout:
+            raise AgentFailure(f"agent did not answer {what} within {timeout_s:g} s (hung, too slow, or not "
+                               f"reading its channel); the agent process was stopped") from None
+        except channel.ChannelClosed as exc:
+            raise AgentFailure(f"agent process exited or closed its channel during {what} ({exc})") from None
+        except channel.ProtocolError as exc:
+            raise AgentFailure(f"agent broke the channel protocol during {what}: {exc}") from None
+        if reply.kind == channel.ERROR:
+            raise AgentFailure(reply.value)
+        if reply.kind != expected:
+            raise AgentFailure(f"agent broke the channel protocol during {what}: sent {reply.kind!r}, want {expected!r}")
+        return reply.value
 
-    def start(self) -> None:
-        if self.ready:
-            return
-        kind, payload = self._receive(self.limits.agent_start_timeout_s, "its start-up")
-        if kind != "ready":
-            raise AgentFailure(str(payload))
-        self.ready = True
+    def start(self) -> channel.AgentDescription:
+        return self._exchange(None, channel.READY, self.limits.agent_start_timeout_s, "its start-up")
 
-    def ask(self, message: tuple, what: str) -> Any:
-        try:
-            self.conn.send(message)
-        except (OSError, BrokenPipeError) as exc:
-            raise AgentFailure(f"agent process exited before {what} ({type(exc).__name__})") from None
-        kind, payload = self._receive(self.limits.decision_timeout_s, what)
-        if kind == "error":
-            raise AgentFailure(str(payload))
-        return payload
+    def reset(self, info: dict) -> None:
+        self._exchange(("reset", info), channel.OK, self.limits.decision_timeout_s, "reset()")
+
+    def act(self, obs: Any, info: dict, decision: int) -> int | tuple[float, ...]:
+        return self._exchange(("act", obs, info), channel.ACTION, self.limits.decision_timeout_s,
+                              f"act() at decision {decision}")
 
 
 class _EnvSlot:
@@ -161,7 +171,7 @@ def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits
     try:
         agent.start()
     except AgentFailure as exc:
-        return outcome(blank_record(task, AGENT_ERROR, str(exc)), AGENT_ERROR, True)
+        return outcome(blank_record(task, AGENT_ERROR, str(exc)), AGENT_ERROR, False)
     try:
         env = env_slot.get(task)
         beat(force=True)
@@ -170,18 +180,18 @@ def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits
         return outcome(blank_record(task, SIM_ERROR, "env reset raised:\n" + traceback.format_exc(limit=-8)), SIM_ERROR, True)
     beat(force=True)
     try:
-        agent.ask(("reset", info), "reset()")
+        agent.reset(info)
     except AgentFailure as exc:
-        return outcome(partial_record(env, task, AGENT_ERROR, str(exc)), AGENT_ERROR, True)
+        return outcome(partial_record(env, task, AGENT_ERROR, str(exc)), AGENT_ERROR, False)
     decisions = 0
     while True:
         if limits.max_decisions is not None and decisions >= limits.max_decisions:
             return outcome(partial_record(env, task, DECISION_CAP, ""), "ok", False)
         start = time.perf_counter()
         try:
-            action = agent.ask(("act", obs, info), f"act() at decision {decisions}")
+            action = agent.act(obs, info, decisions)
         except AgentFailure as exc:
-            return outcome(partial_record(env, task, AGENT_ERROR, str(exc)), AGENT_ERROR, True)
+            return outcome(partial_record(env, task, AGENT_ERROR, str(exc)), AGENT_ERROR, False)
         times.append(time.perf_counter() - start)
         if not _valid_action(env.action_space, action):
             error = f"invalid action {action!r} at decision {decisions}: want an element of {env.action_space}"
@@ -200,10 +210,12 @@ def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits
             return outcome(record, "ok", False)
 
 
-def env_main(pool_conn: Connection, agent_conn: Connection, limits: RunnerLimits, lifeline: Connection,
+def env_main(pool_conn: Connection, limits: RunnerLimits, lifeline: Connection,
              environ: dict[str, str] | None = None) -> None:
     """Entry point of the env process (started by the episode pool with the caller's ``environ``;
-    it exits when ``lifeline`` closes)."""
+    it exits when ``lifeline`` closes). It makes itself non-dumpable first, so an agent process
+    of the same user can neither trace it nor read its memory."""
+    protect_process()
     watch_lifeline(lifeline)
     adopt_environment(environ)
     import hbmp_bench.envs.behavior_env  # noqa: F401  (imported before the first heartbeat)
@@ -217,9 +229,7 @@ def env_main(pool_conn: Connection, agent_conn: Connection, limits: RunnerLimits
             pool_conn.send(("beat", None))
             last_beat[0] = now
 
-    agent = _AgentLink(agent_conn, limits, beat)
     beat(force=True)
-
     try:
         while True:
             try:
@@ -228,7 +238,12 @@ def env_main(pool_conn: Connection, agent_conn: Connection, limits: RunnerLimits
                 return
             if kind != "run":
                 return
-            pool_conn.send(("done", run_episode(payload, env_slot, agent, limits, beat)))
+            end = channel.EnvEnd(channel.socket_from(reduction.recv_handle(pool_conn)), beat, BEAT_PERIOD_S)
+            try:
+                done = run_episode(payload, env_slot, _AgentLink(end, limits), limits, beat)
+            finally:
+                end.close()
+            pool_conn.send(("done", done))
     except (BrokenPipeError, OSError):
         return
     finally:

@@ -6,6 +6,12 @@ whose record is already there, keyed by (suite, town, task, episode, agent, fide
 killed run loses at most the episodes in flight and never counts one twice. A torn last line is
 cut before appending. Episodes recorded as ``sim_error`` are run again on resume (the last record
 of a key wins when reading).
+
+The agent is untrusted: no code of it runs in this process. It is built once in a sandboxed
+agent process first (``describe_agent``), which also says which env it needs (only known envs
+and observation options are accepted). While the run goes on, the records file must hold
+exactly what this run appended to it (``integrity.RecordsLedger``); a file changed behind the
+evaluator's back raises ``TamperedError``.
 """
 
 from __future__ import annotations
@@ -18,13 +24,20 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from hbmp_bench.errors import UnknownNameError
-from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool
+from hbmp_bench.errors import Interrupted, UnknownNameError, UserError
+from hbmp_bench.evaluation.channel import AgentDescription
+from hbmp_bench.evaluation.integrity import RecordsLedger
+from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool, describe_agent
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, agent_slug, suite_tasks
-from hbmp_bench.metrics.records import SIM_ERROR, EpisodeRecord, append_record, latest_per_key, read_records, repair_records
+from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, EpisodeRecord, latest_per_key, repair_records
 
 BACKENDS = ("process", "ray")
 """``process``: an ``EpisodePool`` on this machine; ``ray``: Ray actors (local or a cluster)."""
+
+AGENT_ENV_FACTORIES = ("hbmp_bench.envs.control_env:ControlEnv",)
+"""Envs an agent may ask for besides the behavior env (the flat baseline's control env). Only the
+evaluator (``RunnerLimits.env_factory``) may name another: an agent naming its own module would
+run its code in the env process."""
 
 
 @dataclass(frozen=True)
@@ -45,6 +58,31 @@ class EvaluationResult:
     skipped: int
     wall_s: float
     missing: int
+
+    @property
+    def sim_errors(self) -> int:
+        """Episodes the simulation could not finish (not scored; run again on resume)."""
+        return sum(r.end_reason == SIM_ERROR for r in self.records)
+
+    @property
+    def agent_errors(self) -> int:
+        """Episodes the agent failed by raising, hanging, dying or breaking the protocol (scored as failures)."""
+        return sum(r.end_reason == AGENT_ERROR for r in self.records)
+
+
+class EvaluationInterrupted(Interrupted):
+    """Ctrl-C during ``evaluate``, after its processes ended: ``path`` keeps ``finished`` of the
+    ``selected`` episodes; the same evaluation again runs the rest."""
+
+    def __init__(self, path: Path, finished: int, selected: int):
+        self.path, self.finished, self.selected = path, finished, selected
+        super().__init__(f"{finished} of {selected} episodes are recorded in {path}; "
+                         "run the same evaluation again to resume")
+
+
+def _check_workers(workers: int | None) -> None:
+    if workers is not None and workers < 1:
+        raise UserError(f"workers must be >= 1 (parallel episode slots), got {workers}")
 
 
 def records_path(out_dir: str | os.PathLike, suite: str, agent: str) -> Path:
@@ -71,8 +109,7 @@ def iter_outcomes(
 
     if backend not in BACKENDS:
         raise UnknownNameError("backend", backend, BACKENDS)
-    if workers is not None and workers <= 0:
-        raise ValueError(f"workers must be > 0, got {workers}")
+    _check_workers(workers)
     limits = limits or RunnerLimits()
     if not tasks:
         return
@@ -123,35 +160,46 @@ def evaluate(
         workers / backend / address: see ``iter_outcomes``.
         limits: timeouts, watchdog and retries; ``max_decisions`` is refused (capped episodes
             are no evaluation).
-        check_agent: build the agent once here first, so a bad name fails before any episode.
+        check_agent: build the agent once first (in a sandboxed agent process, see
+            ``describe_agent``), so a bad name fails before any episode, and take its env needs
+            and checkpoint fingerprint from it.
+
+    Every option is checked before anything is written. Ctrl-C (``KeyboardInterrupt``) ends the
+    episodes in flight and their processes, keeps every finished record, and raises
+    :class:`EvaluationInterrupted`, which says how many are kept; calling again resumes.
+    Raises ``TamperedError`` when the records file changes behind the evaluator's back.
     """
     limits = limits or RunnerLimits()
     if limits.max_decisions is not None:
         raise ValueError("evaluate runs whole episodes: limits.max_decisions must be None")
     if backend not in BACKENDS:
         raise UnknownNameError("backend", backend, BACKENDS)
+    _check_workers(workers)
     selection = suite_tasks(suite, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity)
     fingerprint = ""
     if check_agent:
-        from hbmp_bench.agents import load_agent
-
-        built = load_agent(agent)
-        limits = with_agent_env(limits, built)
-        fingerprint = getattr(built, "fingerprint", "")
+        description = describe_agent(agent, limits)
+        limits = with_agent_env(limits, description)
+        fingerprint = description.fingerprint
     path = Path(path) if path is not None else records_path(out_dir, selection[0].suite, agent)
     path.parent.mkdir(parents=True, exist_ok=True)
     check_agent_fingerprint(path, agent, fingerprint)
     repair_records(path)
-    finished = {r.key for r in _read(path) if r.end_reason != SIM_ERROR}
+    ledger = RecordsLedger(path)
+    finished = {r.key for r in latest_per_key(ledger.records()) if r.end_reason != SIM_ERROR}
     todo = [t for t in selection if t.key not in finished]
     start = time.perf_counter()
     ran = 0
-    for outcome in iter_outcomes(todo, workers=workers, backend=backend, address=address, limits=limits,
-                                 progress=progress):
-        append_record(path, outcome.record)
-        ran += 1
+    try:
+        for outcome in iter_outcomes(todo, workers=workers, backend=backend, address=address, limits=limits,
+                                     progress=progress):
+            ledger.append(outcome.record)
+            ran += 1
+    except KeyboardInterrupt:  # the pool has ended its processes on the way out
+        kept = len(selection) - len(todo) + ran
+        raise EvaluationInterrupted(path, kept, len(selection)) from None
     wanted = {t.key: k for k, t in enumerate(selection)}
-    records = sorted((r for r in _read(path) if r.key in wanted), key=lambda r: wanted[r.key])
+    records = sorted((r for r in latest_per_key(ledger.records()) if r.key in wanted), key=lambda r: wanted[r.key])
     return EvaluationResult(path, tuple(records), ran, len(selection) - len(todo), time.perf_counter() - start,
                             len(selection) - len(records))
 
@@ -178,14 +226,20 @@ def check_agent_fingerprint(path: Path, agent: str, fingerprint: str) -> None:
         os.replace(tmp, side)
 
 
-def with_agent_env(limits: RunnerLimits, agent) -> RunnerLimits:
-    """``limits`` with the env the agent asks for: an agent may name an ``env_factory``
-    (``module:callable``, e.g. the flat baseline's control env) and ``env_kwargs`` (e.g. the
-    observation kind its policy was trained with). Explicit limits win."""
-    factory = limits.env_factory or getattr(agent, "env_factory", None)
-    kwargs = {**dict(getattr(agent, "env_kwargs", {}) or {}), **dict(limits.env_kwargs)}
+def with_agent_env(limits: RunnerLimits, agent: AgentDescription) -> RunnerLimits:
+    """``limits`` with the env the agent asks for: an agent may name an ``env_factory`` from
+    ``AGENT_ENV_FACTORIES`` (the flat baseline's control env) and ``env_kwargs`` that change what
+    its policy sees (``agents.learned.OBSERVATION_OPTIONS``: the observation kind it was trained
+    with). Anything else is refused with ValueError: an agent must not pick an easier env or run
+    its own code in the env process. Explicit limits win."""
+    from hbmp_bench.agents.learned import OBSERVATION_OPTIONS
+
+    if agent.env_factory is not None and agent.env_factory not in AGENT_ENV_FACTORIES:
+        raise ValueError(f"the agent asks for env_factory {agent.env_factory!r}; an agent may only ask for "
+                         f"{list(AGENT_ENV_FACTORIES)} (the evaluator can set another with RunnerLimits.env_factory)")
+    unknown = sorted(k for k, _ in agent.env_kwargs if k not in OBSERVATION_OPTIONS)
+    if unknown:
+        raise ValueError(f"the agent asks for env options {unknown}; an agent may only set {list(OBSERVATION_OPTIONS)}")
+    factory = limits.env_factory or agent.env_factory
+    kwargs = {**dict(agent.env_kwargs), **dict(limits.env_kwargs)}
     return dataclasses.replace(limits, env_factory=factory, env_kwargs=tuple(kwargs.items()))
-
-
-def _read(path: Path) -> list[EpisodeRecord]:
-    return latest_per_key(read_records(path)) if path.exists() else []

@@ -9,7 +9,12 @@ Rules:
 - Only *complete* entries are ranked: every episode of the official suite (all towns, tasks and
   episodes) with no ``sim_error`` left. A run on a subset (``towns``/``tasks``/``episodes``) is
   written as ``<agent>.<fidelity>.subset.json`` and listed under "Partial runs (not ranked)"; it never
-  replaces a full entry.
+  replaces a full entry. An entry with sim errors is listed there too, with their count.
+- ``agent_error`` episodes are the agent's failures (success false, driving score 0) and count.
+- A submission refuses to write its entry when the board's results files changed while it ran
+  (``integrity.BoardSnapshot``), and reads its records only from bytes it checked
+  (``integrity.RecordsLedger``): an agent under evaluation cannot slip in a forged entry.
+- ``add`` checks that a results file's ``complete`` and ``sim_errors`` agree with its episodes.
 - A results file whose suite definition hash differs from the installed suite's is refused
   (``StaleResultsError``) when it is added and when the README is generated: its episodes are not
   the current suite's.
@@ -25,6 +30,7 @@ from pathlib import Path
 
 from hbmp_bench import __version__
 from hbmp_bench.evaluation.evaluate import evaluate
+from hbmp_bench.evaluation.integrity import BoardSnapshot
 from hbmp_bench.evaluation.provenance import git_commit, library_versions, machine_description, utc_now
 from hbmp_bench.evaluation.tasks import RunnerLimits, agent_slug, suite_tasks
 from hbmp_bench.metrics import report
@@ -122,9 +128,19 @@ def results_document(
 
 
 def check_results(doc: dict, source: str = "results") -> dict:
-    """``doc`` if it is a results file of the installed suite; else a clear error."""
+    """``doc`` if it is a results file of the installed suite whose ``complete`` and ``sim_errors``
+    agree with its episodes; else a clear error."""
     if not isinstance(doc, dict) or doc.get("format") != RESULTS_FORMAT or "suite" not in doc:
         raise ValueError(f"{source} is not a leaderboard results file (format {RESULTS_FORMAT})")
+    episodes = doc.get("episodes")
+    if not isinstance(episodes, list) or not all(isinstance(e, dict) for e in episodes):
+        raise ValueError(f"{source} has no list of episodes")
+    sim_errors = sum(e.get("end_reason") == SIM_ERROR for e in episodes)
+    if doc.get("sim_errors") != sim_errors:
+        raise ValueError(f"{source} says sim_errors={doc.get('sim_errors')!r} but its episodes hold {sim_errors}")
+    if doc.get("complete") and (sim_errors or doc.get("subset") or len(episodes) != doc.get("expected_episodes")):
+        raise ValueError(f"{source} says complete, but it has {len(episodes)} of {doc.get('expected_episodes')} "
+                         f"episodes, {sim_errors} sim errors, subset={doc.get('subset')!r}")
     current = get_suite(doc["suite"]).definition_hash()
     if doc.get("suite_hash") != current:
         raise StaleResultsError(
@@ -173,13 +189,14 @@ def _row(doc: dict, rank: str) -> list[str]:
         *(f"{by_task[t]:.1f}" if t in by_task else "–" for t in TASKS),
         f"{s.get('mean_driving_score', 0.0):.1f}", f"{100.0 * s.get('mean_route_completion', 0.0):.1f}",
         "∞" if km is None else f"{km:.2f}", str(s.get("episodes", 0)),
+        str(doc.get("sim_errors", 0)),
         prov.get("package_version") or "", (prov.get("git_commit") or "")[:10], (prov.get("date_utc") or "")[:10],
         "" if prov.get("wall_time_s") is None else f"{prov['wall_time_s']:.0f}",
     ]
 
 
 HEADER = ["rank", "agent", "success %", *(TASK_LABELS[t] + " %" for t in TASKS), "driving score",
-          "route completion %", "km / infraction", "episodes", "version", "commit", "date", "wall s"]
+          "route completion %", "km / infraction", "episodes", "sim errors", "version", "commit", "date", "wall s"]
 
 
 def _table(rows: Iterable[list[str]]) -> str:
@@ -201,7 +218,9 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
         f"{spec.episodes_per_task} episodes. Generated from the `*.json` results files by "
         f"`hbmp-bench leaderboard render --suite {spec.name}`; do not edit by hand. Ranked by success %, then "
         "driving score (CARLA Leaderboard, 0–100); km / infraction counts collisions, wrong lane, off-road and "
-        "red lights; wall s is the submission's wall time with its `workers` (see each results file).\n",
+        "red lights; wall s is the submission's wall time with its `workers` (see each results file). Agent "
+        "errors count as failed episodes; sim errors (the simulator failed, not the agent) are not scored, and an "
+        "entry with any is not ranked.\n",
     ]
     if not ranked:
         parts.append("No complete entries yet.\n")
@@ -211,7 +230,7 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
         parts.append(_table(_row(e, str(k)) for k, e in enumerate(group, start=1)))
     if partial:
         parts.append("## Partial runs (not ranked)\n")
-        parts.append("Subsets of the suite, or runs with missing or errored episodes.\n")
+        parts.append("Subsets of the suite, or runs with missing episodes or sim errors.\n")
         parts.append(_table(_row(e, "–") for e in sorted(partial, key=_rank_key)))
     path = Path(board_dir) / spec.name / "README.md"
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -251,9 +270,12 @@ def submit(
 
     The raw records go to ``records_dir`` (default ``runs_dir(board_dir, suite)``), so an
     interrupted submission resumes where it stopped. Returns (results path, results document).
+    Raises ``TamperedError`` (writing nothing) when the records file or the board's results files
+    changed behind its back while it ran.
     """
     spec = get_suite(suite)
     load_entries(board_dir, spec.name)  # refuse before a long run if the board holds stale files
+    snapshot = BoardSnapshot(Path(board_dir) / spec.name)
     selection = suite_tasks(spec.name, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity)
     result = evaluate(spec.name, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity,
                       out_dir=records_dir or runs_dir(board_dir, spec.name), workers=workers, backend=backend,
@@ -264,6 +286,7 @@ def submit(
         episodes=sorted({t.episode for t in selection}), fidelity=selection[0].fidelity,
         wall_s=result.wall_s if result.skipped == 0 else None, workers=workers or os.cpu_count(), backend=backend,
     )
+    snapshot.check_unchanged()
     path = write_json(entry_path(board_dir, spec.name, agent, doc["subset"], doc["fidelity"]), doc)
     render_readme(board_dir, spec.name)
     return path, doc

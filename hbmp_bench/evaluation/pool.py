@@ -1,12 +1,15 @@
-"""A pool of isolated episode slots: per slot one env process and one agent process.
+"""A pool of isolated episode slots: per slot one env process, and one fresh agent process per episode.
 
-The pool (in the calling process) owns every child. Each slot pairs an env process, which holds
-the SUMO simulation (libsumo: one per process), with an agent process connected to it by a pipe:
-the agent sees the observations and infos the env process sends, nothing else. The pool hands
-out one episode at a time per slot, watches heartbeats, and
+The pool (in the calling process) owns every child. Each slot has an env process, which holds
+the SUMO simulation (libsumo: one per process) across episodes. For every episode the pool
+starts a new agent process and hands the env process its end of a fresh channel (a socket pair);
+the agent sees the observations and infos the env process sends, nothing else, and enters the
+sandbox (``sandbox``) before any agent code runs. When the episode ends the pool kills the agent
+process with its whole session (whatever it forked), before the outcome is yielded. The pool
+hands out one episode at a time per slot, watches heartbeats, and
 
-- records an ``agent_error`` episode and restarts the slot when the agent raises, hangs past
-  ``decision_timeout_s`` or dies;
+- records an ``agent_error`` episode when the agent raises, hangs past ``decision_timeout_s``,
+  dies, or breaks the channel's protocol (its exit status is added to the error);
 - kills a slot whose env process sends no heartbeat for ``watchdog_s`` (``start_timeout_s``
   right after it starts) or dies, and retries that episode up to ``retries`` times before
   recording a ``sim_error``.
@@ -16,25 +19,38 @@ Outcomes are yielded as episodes finish, so a caller can append each record at o
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing as mp
 import os
+import signal
+import socket
 import time
 from collections import deque
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from multiprocessing import reduction
 from multiprocessing.connection import Connection, wait
 
+from hbmp_bench.errors import UserError
+from hbmp_bench.evaluation import channel
 from hbmp_bench.evaluation.agent_process import agent_main
 from hbmp_bench.evaluation.env_process import blank_record, env_main
+from hbmp_bench.evaluation.sandbox import agent_account, kill_session, protect_process, reap_orphans
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits
-from hbmp_bench.metrics.records import SIM_ERROR, EpisodeRecord
+from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, EpisodeRecord
 
 POLL_S = 0.2
 """How often the pool checks watchdogs while no message arrives [s]."""
 
-PRELOAD = ("hbmp_bench.evaluation.env_process", "hbmp_bench.evaluation.agent_process", "hbmp_bench.envs.behavior_env",
-           "hbmp_bench.agents")
-"""Modules the fork server imports once, so a slot (re)starts in a fraction of a second."""
+PRELOAD = ("hbmp_bench.evaluation.forkserver_guard", "hbmp_bench.evaluation.env_process",
+           "hbmp_bench.evaluation.agent_process", "hbmp_bench.envs.behavior_env", "hbmp_bench.agents", "torch")
+"""Modules the fork server imports once, so a slot (re)starts, and an agent process (with torch
+for learned agents) starts, in a fraction of a second. ``forkserver_guard`` makes the fork
+server non-dumpable. Only trusted modules: never the agent's."""
+
+
+_LIVE: set[int] = set()
+"""Env and agent processes of every pool of this process that are running (never reaped as orphans)."""
 
 
 def default_start_method() -> str:
@@ -42,10 +58,119 @@ def default_start_method() -> str:
     return "forkserver" if "forkserver" in mp.get_all_start_methods() else "spawn"
 
 
+def sandbox_context(start_method: str | None, limits: RunnerLimits):
+    """The multiprocessing context agent and env processes start from.
+
+    Checks ``limits.agent_user`` (ValueError for an unknown user when root) and makes this
+    process non-dumpable, so an agent process of the same user can neither trace it nor read
+    its memory (see ``sandbox.protect_process``).
+    """
+    start_method = start_method or default_start_method()
+    if start_method not in ("forkserver", "spawn"):
+        raise ValueError(f"start_method must be 'forkserver' or 'spawn', got {start_method!r}")
+    agent_account(limits.agent_user)
+    protect_process()
+    ctx = mp.get_context(start_method)
+    if start_method == "forkserver":
+        ctx.set_forkserver_preload(list(PRELOAD))
+    return ctx
+
+
+def start_agent(ctx, agent: str, sock: socket.socket, life_r: Connection, limits: RunnerLimits):
+    """Start an agent process for ``agent`` on its end ``sock`` of a channel (closed here once passed)."""
+    proc = ctx.Process(target=agent_main, args=(sock, agent, life_r, limits, dict(os.environ)), name="hbmp-agent")
+    try:
+        proc.start()
+    finally:
+        sock.close()
+    _LIVE.add(proc.pid)
+    return proc
+
+
+def fork_server_pid() -> int | None:
+    """The pid of this process's multiprocessing fork server, None while it has none."""
+    from multiprocessing import forkserver
+
+    return getattr(getattr(forkserver, "_forkserver", None), "_forkserver_pid", None)
+
+
+def end_agent(proc, wait_s: float = 0.0) -> int | None:
+    """Kill agent process ``proc`` with its whole session, and every orphan its descendants left
+    with the fork server (``sandbox.reap_orphans``); returns its exit code from before the kill
+    (None when it was still running after ``wait_s`` [s])."""
+    proc.join(wait_s)
+    code = proc.exitcode
+    kill_session(proc.pid)
+    proc.join(5.0)
+    if proc.is_alive():
+        proc.kill()
+        proc.join(5.0)
+    _LIVE.discard(proc.pid)
+    server = fork_server_pid()
+    if server is not None and server != os.getpid():
+        reap_orphans(server, _LIVE)
+    return code
+
+
+def exit_note(code: int | None, limits: RunnerLimits) -> str:
+    """How an agent process ended, in words (limits named where one ended it); "" while it ran."""
+    if code is None:
+        return ""
+    if code >= 0:
+        return f"agent process exited with code {code}"
+    try:
+        name = signal.Signals(-code).name
+    except ValueError:
+        name = f"signal {-code}"
+    cause = {
+        "SIGXCPU": f": it used up its CPU time limit of {limits.agent_cpu_s} s",
+        "SIGXFSZ": f": it wrote past its file size limit of {limits.agent_file_mb} MiB",
+        "SIGKILL": " (out of memory, or killed by another process)",
+    }.get(name, "")
+    return f"agent process killed by {name}{cause}"
+
+
+def describe_agent(agent: str, limits: RunnerLimits | None = None, start_method: str | None = None
+                   ) -> channel.AgentDescription:
+    """Build ``agent`` once in a sandboxed agent process and return what it says about itself
+    (its env needs and fingerprint), so a bad name fails before any episode and no agent code
+    runs in the caller. Raises ``AgentBuildError`` with the agent's error otherwise."""
+    limits = limits or RunnerLimits()
+    ctx = sandbox_context(start_method, limits)
+    env_sock, agent_sock = socket.socketpair()
+    life_r, life_w = ctx.Pipe(duplex=False)
+    proc = start_agent(ctx, agent, agent_sock, life_r, limits)
+    life_r.close()
+    end = channel.EnvEnd(env_sock)
+    code = None
+    try:
+        reply = end.reply(limits.agent_start_timeout_s)
+    except channel.ChannelTimeout:
+        raise AgentBuildError(f"agent {agent!r} was not built within {limits.agent_start_timeout_s:g} s") from None
+    except (channel.ChannelClosed, channel.ProtocolError) as exc:
+        code = end_agent(proc, 1.0)
+        raise AgentBuildError(f"agent {agent!r} could not be built: {exc}; {exit_note(code, limits) or 'it hung up'}"
+                              ) from None
+    finally:
+        end.close()
+        life_w.close()
+        if code is None:
+            end_agent(proc)
+    if reply.kind == channel.ERROR:
+        raise AgentBuildError(reply.value)
+    if reply.kind != channel.READY:
+        raise AgentBuildError(f"agent {agent!r} broke the channel protocol: sent {reply.kind!r} before being ready")
+    return reply.value
+
+
+class AgentBuildError(UserError):
+    """The agent cannot be built (bad name, import error, broken constructor) in its own process."""
+
+
 @dataclass(frozen=True)
 class EpisodeOutcome:
     """A finished episode: its record, how many attempts it took, and the agent's decision times [s]
-    (round trip through the pipe; 0 when no decision was made)."""
+    (round trip through the channel; 0 when no decision was made)."""
 
     record: EpisodeRecord
     attempts: int
@@ -54,13 +179,15 @@ class EpisodeOutcome:
 
 
 class _Slot:
-    """An env process and an agent process, started on first use and restarted after failures."""
+    """An env process (started on first use, restarted after simulation failures) and the agent
+    process of the episode it runs."""
 
-    def __init__(self, ctx, agent: str, limits: RunnerLimits):
-        self.ctx, self.agent, self.limits = ctx, agent, limits
+    def __init__(self, ctx, limits: RunnerLimits):
+        self.ctx, self.limits = ctx, limits
         self.env_proc = self.agent_proc = None
         self.conn: Connection | None = None
         self.lifeline: Connection | None = None
+        self.life_r: Connection | None = None
         self.task: EpisodeTask | None = None
         self.last_seen = 0.0
         self.heard_from = False
@@ -70,32 +197,42 @@ class _Slot:
         return self.env_proc is not None
 
     def start(self) -> None:
-        env_end, agent_end = self.ctx.Pipe(duplex=True)
         pool_end, env_pool_end = self.ctx.Pipe(duplex=True)
-        life_r, self.lifeline = self.ctx.Pipe(duplex=False)
+        self.life_r, self.lifeline = self.ctx.Pipe(duplex=False)
         environ = dict(os.environ)  # a fork server's children would otherwise see its start-time environment
-        self.agent_proc = self.ctx.Process(target=agent_main, args=(agent_end, self.agent, life_r, environ),
-                                           name="hbmp-agent")
-        self.env_proc = self.ctx.Process(target=env_main, args=(env_pool_end, env_end, self.limits, life_r, environ),
+        self.env_proc = self.ctx.Process(target=env_main, args=(env_pool_end, self.limits, self.life_r, environ),
                                          name="hbmp-env")
-        self.agent_proc.start()
         self.env_proc.start()
+        _LIVE.add(self.env_proc.pid)
         self.heard_from = False
-        for end in (env_end, agent_end, env_pool_end, life_r):
-            end.close()
+        env_pool_end.close()
         self.conn = pool_end
 
     def run(self, task: EpisodeTask) -> None:
-        if not self.alive or task.agent != self.agent:
-            self.stop()
-            self.agent = task.agent
+        """Start the episode's agent process and hand the env process the task and its channel end
+        (a dead env process shows as EOF on ``conn``)."""
+        if not self.alive:
             self.start()
         self.task = task
         self.last_seen = time.monotonic()
-        self.conn.send(("run", task))
+        env_sock, agent_sock = socket.socketpair()
+        try:
+            self.agent_proc = start_agent(self.ctx, task.agent, agent_sock, self.life_r, self.limits)
+            self.conn.send(("run", task))
+            reduction.send_handle(self.conn, env_sock.fileno(), self.env_proc.pid)
+        except OSError:
+            pass
+        finally:
+            env_sock.close()
+
+    def end_agent(self, wait_s: float = 0.0) -> int | None:
+        """Kill the episode's agent process and its session; its exit code from before (see ``end_agent``)."""
+        proc, self.agent_proc = self.agent_proc, None
+        return None if proc is None else end_agent(proc, wait_s)
 
     def stop(self, graceful: bool = True) -> None:
-        """End both processes (a polite stop first when ``graceful``, then kill)."""
+        """End the agent's session and the env process (a polite stop first when ``graceful``, then kill)."""
+        self.end_agent()
         if self.conn is not None:
             if graceful:
                 try:
@@ -103,16 +240,16 @@ class _Slot:
                 except (OSError, BrokenPipeError):
                     pass
             self.conn.close()
-        if self.lifeline is not None:
-            self.lifeline.close()  # the children exit on this EOF
-        for proc in (self.env_proc, self.agent_proc):
-            if proc is None:
-                continue
-            proc.join(1.0 if graceful else 0.0)
-            if proc.is_alive():
-                proc.kill()
-                proc.join(5.0)
-        self.env_proc = self.agent_proc = self.conn = self.lifeline = None
+        for end in (self.lifeline, self.life_r):
+            if end is not None:
+                end.close()  # the children exit on the lifeline's EOF
+        if self.env_proc is not None:
+            self.env_proc.join(1.0 if graceful else 0.0)
+            if self.env_proc.is_alive():
+                self.env_proc.kill()
+                self.env_proc.join(5.0)
+            _LIVE.discard(self.env_proc.pid)
+        self.env_proc = self.conn = self.lifeline = self.life_r = None
         self.task = None
 
     def silent_for(self, now: float) -> float | None:
@@ -123,18 +260,21 @@ class _Slot:
 
     def exit_codes(self) -> str:
         """How the slot's processes ended (waits briefly for them to be reaped)."""
-        for proc in (self.env_proc, self.agent_proc):
-            if proc is not None:
-                proc.join(0.5)
-        return ", ".join(f"{p.name} exit code {p.exitcode}" for p in (self.env_proc, self.agent_proc) if p is not None)
+        procs = [p for p in (self.env_proc, self.agent_proc) if p is not None]
+        for proc in procs:
+            proc.join(0.5)
+        return ", ".join(f"{p.name} exit code {p.exitcode}" for p in procs)
 
 
 class EpisodePool:
     """Isolated slots that run episodes; use as a context manager (``close`` ends every child).
 
+    Creating a pool makes the calling process non-dumpable for the rest of its life (see
+    ``sandbox_context``).
+
     Args:
-        workers: number of slots (each an env process plus an agent process).
-        limits: timeouts, watchdog and retries.
+        workers: number of slots (each an env process, plus an agent process per episode).
+        limits: timeouts, watchdog, retries and the agent sandbox's limits.
         start_method: multiprocessing start method (default ``default_start_method()``); never
             ``fork``, which would copy the caller's threads and simulation state.
     """
@@ -142,14 +282,9 @@ class EpisodePool:
     def __init__(self, workers: int = 1, limits: RunnerLimits | None = None, start_method: str | None = None):
         if workers <= 0:
             raise ValueError(f"workers must be > 0, got {workers}")
-        start_method = start_method or default_start_method()
-        if start_method not in ("forkserver", "spawn"):
-            raise ValueError(f"start_method must be 'forkserver' or 'spawn', got {start_method!r}")
         self.workers = workers
         self.limits = limits or RunnerLimits()
-        self.ctx = mp.get_context(start_method)
-        if start_method == "forkserver":
-            self.ctx.set_forkserver_preload(list(PRELOAD))
+        self.ctx = sandbox_context(start_method, self.limits)
         self._slots: list[_Slot] = []
 
     def __enter__(self) -> "EpisodePool":
@@ -170,7 +305,7 @@ class EpisodePool:
         if not pending:
             return
         while len(self._slots) < min(self.workers, len(pending)):
-            self._slots.append(_Slot(self.ctx, pending[0].agent, self.limits))
+            self._slots.append(_Slot(self.ctx, self.limits))
         while pending or any(s.task is not None for s in self._slots):
             for slot in self._slots:
                 if slot.task is None and pending:
@@ -193,12 +328,16 @@ class EpisodePool:
                 if kind == "done":
                     task = slot.task
                     slot.task = None
+                    failed = payload["status"] == AGENT_ERROR
+                    code = slot.end_agent(wait_s=1.0 if failed else 0.0)
                     if payload["restart"]:
                         slot.stop(graceful=False)
                     if payload["status"] == SIM_ERROR:
                         yield from self._sim_failure(task, payload["record"]["error"], attempts, pending)
                         continue
                     record = EpisodeRecord(**payload["record"])
+                    if failed and code:
+                        record = dataclasses.replace(record, error=f"{record.error}\n({exit_note(code, self.limits)})")
                     yield EpisodeOutcome(record, attempts[task], payload["max_decision_s"], payload["mean_decision_s"])
             now = time.monotonic()
             for slot in self._slots:

@@ -60,6 +60,19 @@ class RunnerLimits:
             (the flat baseline's control env), wrappers and fault-injection tests.
         env_kwargs: extra env options as ``(name, value)`` pairs (e.g. the observation kind a
             policy was trained with).
+        agent_memory_mb: address space the agent process may map (``RLIMIT_AS``) [MiB]; an
+            allocation past it fails (``MemoryError``). None: no limit.
+        agent_cpu_s: CPU time the agent process may use in one episode, building the agent
+            included, all its threads together (``RLIMIT_CPU``) [s]; past it the kernel ends the
+            process and the episode is an ``agent_error``. None: no limit.
+        agent_file_mb: largest file the agent process may write (``RLIMIT_FSIZE``) [MiB]. None: no limit.
+        agent_processes: processes and threads the agent's user may have (``RLIMIT_NPROC``), set
+            only when the agent runs as ``agent_user`` (the count is per user). None: no limit.
+        agent_user: when the evaluator runs as root, the agent process switches to this
+            unprivileged user before it loads the agent (see ``sandbox``); None keeps root, which
+            lets the agent forge results: only for trusted agents. Ignored when not root.
+
+    Every episode starts a fresh agent process, so the agent limits hold per episode.
     """
 
     decision_timeout_s: float = 10.0
@@ -70,11 +83,22 @@ class RunnerLimits:
     max_decisions: int | None = None
     env_factory: str | None = None
     env_kwargs: tuple[tuple[str, Any], ...] = ()
+    agent_memory_mb: int | None = 8192
+    agent_cpu_s: int | None = 3600
+    agent_file_mb: int | None = 1024
+    agent_processes: int | None = 512
+    agent_user: str | None = "nobody"
 
     def __post_init__(self):
         for name in ("decision_timeout_s", "agent_start_timeout_s", "start_timeout_s", "watchdog_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        for name in ("agent_memory_mb", "agent_cpu_s", "agent_file_mb", "agent_processes"):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value <= 0):
+                raise ValueError(f"{name} must be a positive integer or None, got {value!r}")
+        if self.agent_user is not None and (not isinstance(self.agent_user, str) or not self.agent_user.strip()):
+            raise ValueError(f"agent_user must be a user name or None, got {self.agent_user!r}")
         if self.retries < 0:
             raise ValueError(f"retries must be >= 0, got {self.retries}")
         if self.max_decisions is not None and self.max_decisions <= 0:
@@ -149,8 +173,16 @@ def adopt_environment(environ: dict[str, str] | None) -> None:
 
 def watch_lifeline(lifeline) -> None:
     """End this (child) process as soon as ``lifeline`` reaches EOF: the pool holds the only write
-    end, so a killed or crashed pool takes its children with it, even an agent hung in ``act``."""
+    end, so a killed or crashed pool takes its children with it, even an agent hung in ``act``.
+
+    The pool alone ends its children: Ctrl-C in a terminal signals the whole process group, and
+    the children ignore it, so they neither print tracebacks nor die before the pool stops them.
+    """
+    import signal
     import threading
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
     def wait_for_eof() -> None:
         try:

@@ -23,6 +23,12 @@ TURN_DIRECTIONS = frozenset("lLrR")
 """SUMO link directions that count as a turn (left, partly left, right, partly right)."""
 
 
+LANE_CHANGE_CUTOFF_M = 10.0
+"""No lane change starts within this distance of a lane's end [m]: the last metres before a
+junction (solid lines in real towns); a change begun there would enter the junction on another
+lane's connection."""
+
+
 @dataclass(frozen=True)
 class Connection:
     """One drivable link from a lane of an edge to a lane of the next edge.
@@ -53,6 +59,14 @@ class Lane:
     length: float
     width: float
     speed: float
+
+    @functools.cached_property
+    def shape_length(self) -> float:
+        """Length of the drawn shape [m], what a car in this lane drives. SUMO's ``length`` (the unit
+        of lane positions) is shared by all lanes of an edge, so on a curved multi-lane edge it can
+        differ from the shape's by a few percent (20% on a roundabout's inner lane)."""
+        seg = np.diff(self.shape, axis=0)
+        return float(np.hypot(seg[:, 0], seg[:, 1]).sum())
 
 
 class RoadNetwork:
@@ -180,7 +194,8 @@ class RoadNetwork:
         return sum(d in TURN_DIRECTIONS for d in self.turns(route))
 
     def shortest_tree(self, source: str) -> tuple[dict[str, float], dict[str, str]]:
-        """Dijkstra from the END of ``source`` over edge lengths [m].
+        """Dijkstra from the END of ``source`` over the length driven [m]: each step onto an edge
+        costs its junction lanes (the shortest link's) plus the edge's length.
 
         Returns (dist, prev): dist[e] is the length driven from the end of ``source`` to the
         end of ``e``; prev links each reached edge to its predecessor.
@@ -193,12 +208,21 @@ class RoadNetwork:
             if d > dist.get(e, np.inf):
                 continue
             for nxt in self.successors(e):
-                nd = d + self.edge_length[nxt]
+                nd = d + self.junction_length(e, nxt) + self.edge_length[nxt]
                 if nd < dist.get(nxt, np.inf):
                     dist[nxt] = nd
                     prev[nxt] = e
                     heapq.heappush(heap, (nd, nxt))
         return dist, prev
+
+    def junction_length(self, edge: str, to_edge: str) -> float:
+        """Length [m] of the shortest link's junction lanes from ``edge`` onto ``to_edge`` (0 if none)."""
+        return self._junction_lengths.get((edge, to_edge), 0.0)
+
+    @functools.cached_property
+    def _junction_lengths(self) -> dict[tuple[str, str], float]:
+        return {(e, nxt): min(sum(self.lane(ln).shape_length for ln in self.link_lanes(c)) for c in self.links(e, nxt))
+                for e in self.edge_length for nxt in self.successors(e) if self.links(e, nxt)}
 
     @staticmethod
     def path_to(prev: dict[str, str], source: str, target: str) -> tuple[str, ...]:
@@ -229,6 +253,35 @@ class RoadNetwork:
         """Lanes of ``edge`` that have a link onto ``to_edge`` (the lanes that continue a route)."""
         return tuple(sorted({c.from_lane for c in self.links(edge, to_edge)}))
 
+    def route_lanes(self, route: tuple[str, ...], goal_lane: str, goal_pos: float | None = None,
+                    room_m: float = 20.0, cutoff_m: float = LANE_CHANGE_CUTOFF_M) -> tuple[frozenset[str], ...]:
+        """Per edge of ``route``, the lanes from which the car can drive on to ``goal_lane`` (on the
+        last edge: the goal lane itself).
+
+        A lane change needs ``room_m`` [m] of an edge: its length less the last ``cutoff_m`` [m]
+        before the junction where lane changes are closed, or on the goal edge the goal's position
+        ``goal_pos`` [m] (None: the goal edge's room like any edge's). Before an edge with that
+        room these are the lanes that link onto it at all; before an edge without (a short goal
+        edge, a roundabout's ring segment) the car must already be in a lane whose link lands on
+        one of that edge's good lanes. Where no lane does, any linking lane is kept.
+        """
+        return self._route_lanes(tuple(route), goal_lane, goal_pos, float(room_m), float(cutoff_m))
+
+    @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
+    def _route_lanes(self, route: tuple[str, ...], goal_lane: str, goal_pos: float | None, room_m: float,
+                     cutoff_m: float) -> tuple[frozenset[str], ...]:
+        good = [frozenset({goal_lane})]
+        for k in range(len(route) - 2, -1, -1):
+            edge, to_edge = route[k], route[k + 1]
+            last = k + 1 == len(route) - 1
+            room = goal_pos if last and goal_pos is not None else self.edge_length[to_edge] - cutoff_m
+            links = self.links(edge, to_edge)
+            lanes = frozenset(c.from_lane for c in links)
+            if room < room_m:
+                lanes = frozenset(c.from_lane for c in links if c.to_lane in good[-1]) or lanes
+            good.append(lanes)
+        return tuple(reversed(good))
+
     def neighbour_lane(self, lane_id: str, side: int) -> str | None:
         """The drivable lane ``side`` = +1 (left) or -1 (right) of ``lane_id``, else None."""
         lane = self.lanes.get(lane_id)
@@ -254,15 +307,148 @@ class RoadNetwork:
         return self.edge_lanes[edge][0]
 
     def position(self, lane_id: str, pos: float) -> np.ndarray:
-        """Point (2,) [m] at distance ``pos`` [m] along a lane's shape."""
-        return point_along(self.lane(lane_id).shape, pos)
+        """Point (2,) [m] at SUMO lane position ``pos`` [m] (0 .. ``length``) of a lane: like SUMO,
+        the position is scaled onto the drawn shape (by ``shape_length / length``)."""
+        lane = self.lane(lane_id)
+        return point_along(lane.shape, pos * (lane.shape_length / lane.length if lane.length > 0 else 1.0))
 
-    def route_length(self, route: tuple[str, ...], start_pos: float, goal_pos: float) -> float:
-        """Driven length [m] from ``start_pos`` on route[0] to ``goal_pos`` on route[-1]."""
-        if len(route) == 1:
-            return goal_pos - start_pos
-        middle = sum(self.edge_length[e] for e in route[1:-1])
-        return self.edge_length[route[0]] - start_pos + middle + goal_pos
+    # ------------------------------------------------------------- routes
+    def link_lanes(self, link: Connection) -> tuple[str, ...]:
+        """The internal (junction) lanes a link runs over, in driving order; () if it has none."""
+        lanes, lane = [], link.via
+        while lane in self.internal_lanes:
+            lanes.append(lane)
+            lane = self.follow(lane, link.to_edge)
+        return tuple(lanes)
+
+    def route_link(self, edge: str, to_edge: str, lane_id: str, allowed: frozenset[str] | None = None) -> Connection:
+        """The link from ``edge`` onto ``to_edge`` that a car in ``lane_id`` (a lane of ``edge``) takes:
+        its own lane's link where it has one (the one that keeps the lane index, if several), else
+        the link of the nearest lane that has one (the car changes lanes on ``edge``). Only links
+        from the ``allowed`` lanes count, where any is (see :meth:`route_lanes`)."""
+        links = self.links(edge, to_edge)
+        if not links:
+            raise ValueError(f"no link from {edge!r} to {to_edge!r} in {self.path.name}")
+        links = tuple(c for c in links if allowed is None or c.from_lane in allowed) or links
+        index = self.lane(lane_id).index
+        return min(links, key=lambda c: (abs(self.lanes[c.from_lane].index - index),
+                                         abs(self.lanes[c.to_lane].index - self.lanes[c.from_lane].index),
+                                         c.to_lane))
+
+    def route_path(self, route: tuple[str, ...] | list[str], start_lane: str | None = None,
+                   goal_lane: str | None = None, goal_pos: float | None = None) -> RoutePath:
+        """The lanes a car drives along ``route`` (see :class:`RoutePath`), starting in ``start_lane``
+        (default: the rightmost lane of route[0]): on each edge the lane it leaves the edge by (the
+        from-lane of the link ``route_link`` picks for the lane it entered by, among the lanes that
+        lead on to ``goal_lane`` at ``goal_pos`` [m]: :meth:`route_lanes`), the junction lanes of
+        that link, and on the last edge ``goal_lane`` (default: the lane the last link leads to)."""
+        route = tuple(route)
+        lane = start_lane or self.rightmost_lane(route[0])
+        if self.lane(lane).edge != route[0]:
+            raise ValueError(f"start lane {lane!r} is not on the route's first edge {route[0]!r}")
+        if goal_lane is not None and self.lane(goal_lane).edge != route[-1]:
+            raise ValueError(f"goal lane {goal_lane!r} is not on the route's last edge {route[-1]!r}")
+        good = self.route_lanes(route, goal_lane, goal_pos) if goal_lane is not None else (None,) * len(route)
+        lanes, edge_index, junction_index = [lane], [0], []
+        for k, (edge, to_edge) in enumerate(zip(route[:-1], route[1:])):
+            link = self.route_link(edge, to_edge, lane, good[k])
+            lanes[-1] = link.from_lane
+            junction = self.link_lanes(link)
+            junction_index.append(range(len(lanes), len(lanes) + len(junction)))
+            lane = link.to_lane
+            lanes.extend(junction)
+            edge_index.append(len(lanes))
+            lanes.append(lane)
+        if goal_lane is not None:
+            lanes[-1] = goal_lane
+        offsets = np.concatenate([[0.0], np.cumsum([self.lane(ln).shape_length for ln in lanes])])
+        junctions = tuple(tuple(JunctionLane(lanes[i], self.lane(lanes[i]).shape, float(offsets[i])) for i in ids)
+                          for ids in junction_index)
+        edge_lanes = [self.lane(lanes[i]) for i in edge_index]
+        return RoutePath(route, tuple(lanes), offsets, offsets[edge_index], offsets[np.add(edge_index, 1)],
+                         np.array([ln.shape_length / ln.length if ln.length > 0 else 1.0 for ln in edge_lanes]),
+                         junctions)
+
+    def route_length(self, route: tuple[str, ...], start_pos: float, goal_pos: float,
+                     start_lane: str | None = None, goal_lane: str | None = None) -> float:
+        """Length [m] a car drives from ``start_pos`` on ``start_lane`` to ``goal_pos`` on ``goal_lane``
+        (SUMO lane positions [m] on route[0] and route[-1]; lanes as in :meth:`route_path`), along the
+        route's lanes and the junction lanes between them."""
+        return self.route_path(route, start_lane, goal_lane, goal_pos).length(start_pos, goal_pos)
+
+
+@dataclass(frozen=True)
+class JunctionLane:
+    """An internal lane of a :class:`RoutePath`: id, shape (N, 2) [m], ``start`` [m] = distance
+    from the start of the route's first lane to the start of this lane."""
+
+    id: str
+    shape: np.ndarray
+    start: float
+
+
+@dataclass(frozen=True)
+class RoutePath:
+    """The lanes a car drives along an edge route, junction (internal) lanes included.
+
+    Distances are along the lanes' drawn shapes [m] (``Lane.shape_length``: what a car drives, what
+    the world's odometer measures); SUMO lane positions are mapped onto them as SUMO does. E route
+    edges, L lanes.
+
+    Attributes:
+        route: (E,) edge ids.
+        lanes: (L,) lane ids in driving order: one lane of each route edge (the lane the car leaves
+            it by; on the last edge the goal lane) and, between two edges, the internal lanes of the
+            link joining them (``RoadNetwork.route_link``). Each lane leads into the next, or onto
+            its edge where the car changes lanes on that edge.
+        offsets: (L + 1,) [m] distance from the start of ``lanes[0]`` to the start of each lane;
+            ``offsets[-1]`` is the length of all of them.
+        edge_start / edge_end: (E,) [m] distance from the start of ``lanes[0]`` to the start / end
+            of each route edge's lane; junction k spans ``edge_end[k]`` .. ``edge_start[k + 1]``.
+        edge_scale: (E,) drawn length per SUMO lane position of each route edge's lane [m/m].
+        junctions: (E - 1,) the internal lanes between route[k] and route[k + 1] (may be none).
+    """
+
+    route: tuple[str, ...]
+    lanes: tuple[str, ...]
+    offsets: np.ndarray
+    edge_start: np.ndarray
+    edge_end: np.ndarray
+    edge_scale: np.ndarray
+    junctions: tuple[tuple[JunctionLane, ...], ...]
+
+    def position(self, edge_index: int, lane_pos: float) -> float:
+        """Distance [m] from the start of the route to SUMO lane position ``lane_pos`` [m] on any lane
+        of route[edge_index] (the lanes of an edge share one SUMO length)."""
+        return float(self.edge_start[edge_index] + lane_pos * self.edge_scale[edge_index])
+
+    def length(self, start_pos: float, goal_pos: float) -> float:
+        """Driven length [m] from SUMO lane position ``start_pos`` [m] on the first edge to
+        ``goal_pos`` [m] on the last."""
+        return self.position(len(self.route) - 1, goal_pos) - self.position(0, start_pos)
+
+    def junction_position(self, edge_index: int, point: np.ndarray) -> float:
+        """Distance [m] from the start of the route to a point (2,) [m] in the junction after
+        route[edge_index]: its projection on that junction's lanes, clipped to the junction."""
+        lo, hi = float(self.edge_end[edge_index]), float(self.edge_start[edge_index + 1])
+        best_m, at = np.inf, lo
+        for lane in self.junctions[edge_index]:
+            arc_m, off_m = project_on_polyline(lane.shape, point)
+            if off_m < best_m:
+                best_m, at = off_m, lane.start + arc_m
+        return float(np.clip(at, lo, hi))
+
+
+def project_on_polyline(shape: np.ndarray, point: np.ndarray) -> tuple[float, float]:
+    """(arc length [m] of the nearest point of a polyline (N, 2) to ``point`` (2,), distance [m] to it)."""
+    seg = np.diff(shape, axis=0)
+    seg_len2 = np.einsum("ij,ij->i", seg, seg)
+    t = np.clip(np.einsum("ij,ij->i", point - shape[:-1], seg) / np.maximum(seg_len2, 1e-12), 0.0, 1.0)
+    nearest = shape[:-1] + t[:, None] * seg
+    dist = np.hypot(*(nearest - point).T)
+    i = int(np.argmin(dist))
+    seg_len = np.sqrt(seg_len2)
+    return float(seg_len[:i].sum() + t[i] * seg_len[i]), float(dist[i])
 
 
 def point_along(shape: np.ndarray, pos: float) -> np.ndarray:

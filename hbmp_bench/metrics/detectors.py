@@ -1,7 +1,18 @@
 """Infraction and outcome detectors, run every simulation step on the ego's footprint.
 
-Events are counted once per entry (a rising edge), not once per step: driving 3 s on the
-opposite lane is one wrong-lane event; touching the same car for 10 steps is one collision.
+The ego is judged against the route it follows, not against a simulator's map matching of its pose:
+
+- **Collision**: the footprint overlaps another actor's (separating axes); once per contact.
+- **Red light**: the front bumper's move during the step crosses the stop line of the lane the ego
+  follows (the world's followed lane, whose link onto the route's next edge carries the signal)
+  while that signal is red. The test intersects the bumper's segment between two samples with the
+  stop-line segment across the lane, so it holds at any speed and only for the lane's own width: a
+  pose far off its lane crosses no stop line.
+- **Wrong lane / off-road**: a fraction of the footprint on lanes running the other way / on no
+  lane and no junction. One event per continuous entry: inside a junction (most of the footprint on
+  a junction polygon) the state is held, not judged; after an entry the state must stay clear for
+  ``REARM_DISTANCE_M`` driven and ``REARM_TIME_S`` before a new entry counts, so jitter at a lane
+  edge and the pass through a junction do not count twice.
 """
 
 from __future__ import annotations
@@ -10,18 +21,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hbmp_bench.metrics.geometry import LaneLocator, box_corners, boxes_overlap, footprint_points
+from hbmp_bench.metrics.geometry import LaneLocator, box_corners, boxes_overlap, crosses_line, footprint_points
 
 WRONG_LANE_FRACTION = 0.3
-"""Wrong lane: more than this fraction of the footprint on lanes running the other way (CoRL2017)."""
+"""Wrong lane: more than this fraction of the judged footprint on lanes running the other way (CoRL2017)."""
 OFF_ROAD_FRACTION = 0.3
-"""Off-road: more than this fraction of the footprint on no drivable lane and no junction."""
-RED_STATES = frozenset("rR")
-"""Signal chars that make crossing the stop line a red-light violation."""
-
-STOP_LINE_REACH_M = 3.0
-"""The stop line counts as crossed when the light ahead changes within this distance of it [m]
-(farther away, a changed light ahead means a lane change, not a crossing)."""
+"""Off-road: more than this fraction of the judged footprint on no drivable lane and no junction."""
+JUNCTION_HOLD_FRACTION = 0.5
+"""Wrong lane and off-road are held (not judged) while more than this fraction of the footprint
+lies inside junction polygons; elsewhere they are judged on the footprint outside junctions."""
+REARM_DISTANCE_M = 5.0
+"""After a wrong-lane or off-road entry, the state must be clear for this distance driven [m] ..."""
+REARM_TIME_S = 1.0
+"""... and for this long [s] before a new entry of the same kind counts."""
+RED_STATES = frozenset("rRu")
+"""Signal chars at which crossing the stop line is a red-light violation (``u``: red-yellow)."""
 
 EVENT_KINDS = ("collision_vehicle", "collision_pedestrian", "wrong_lane", "off_road", "red_light")
 
@@ -49,22 +63,75 @@ class StepEvents:
         return self.collisions + self.wrong_lane + self.off_road + self.red_light
 
 
+@dataclass(frozen=True, eq=False)
+class StopLine:
+    """The stop line at the end of the lane the ego follows, with the signal of the link it takes there.
+
+    Attributes:
+        lane: id of the approach lane the line ends.
+        ends: (2, 2) the line's right and left end [m], across the lane's width.
+        direction: (2,) unit travel direction at the line.
+        signal: the link's signal char now (``r``, ``y``, ``g``, ``G`` ...).
+    """
+
+    lane: str
+    ends: np.ndarray
+    direction: np.ndarray
+    signal: str
+
+
 @dataclass
 class EgoFrame:
-    """The ego at one step: centre (2,) [m], yaw [rad], footprint [m], the next traffic light on its
-    route as (tls, link index, distance [m], state) or None, and the edge it drives on ("" if unknown)."""
+    """The ego at one step.
+
+    Attributes:
+        xy: (2,) footprint centre [m].
+        yaw: heading [rad].
+        length / width: footprint [m].
+        stop_line: the signalised stop line ahead on the lane the ego follows, None where that lane's
+            link is not signalised (or the ego follows no lane).
+        edge: the edge of the lane the ego follows (its lanes win where lanes overlap in plan view),
+            "" if none.
+    """
 
     xy: np.ndarray
     yaw: float
     length: float
     width: float
-    light: tuple[str, int, float, str] | None = None
+    stop_line: StopLine | None = None
     edge: str = ""
 
 
 @dataclass
+class _Latch:
+    """One event per continuous entry: rises once, falls after being clear for a distance and a time."""
+
+    active: bool = False
+    clear_m: float = 0.0
+    clear_since_s: float = np.inf
+
+    def update(self, state: bool | None, moved_m: float, time_s: float) -> int:
+        """``state``: True (in violation), False (clear), None (cannot judge: hold). Returns 1 on a new entry."""
+        if state is None:
+            return 0
+        if state:
+            self.clear_m, self.clear_since_s = 0.0, np.inf
+            if self.active:
+                return 0
+            self.active = True
+            return 1
+        if self.active:
+            if not np.isfinite(self.clear_since_s):
+                self.clear_since_s = time_s
+            self.clear_m += moved_m
+            if self.clear_m >= REARM_DISTANCE_M and time_s - self.clear_since_s >= REARM_TIME_S:
+                self.active = False
+        return 0
+
+
+@dataclass
 class InfractionDetector:
-    """Stateful per-episode detector. Call ``reset`` at episode start, ``update`` every step.
+    """Stateful per-episode detector. Call ``update`` every step (a new detector per episode).
 
     Args:
         locator: lane lookup of the episode's network.
@@ -79,13 +146,17 @@ class InfractionDetector:
     timeout_s: float
     totals: dict[str, int] = field(default_factory=lambda: dict.fromkeys(EVENT_KINDS, 0))
     _touching: frozenset[str] = frozenset()
-    _wrong: bool = False
-    _off: bool = False
-    _light: tuple[str, int, float, str] | None = None
+    _wrong: _Latch = field(default_factory=_Latch)
+    _off: _Latch = field(default_factory=_Latch)
+    _xy: np.ndarray | None = None
+    _front: np.ndarray | None = None
+    _stop_line: StopLine | None = None
+    _red_lane: str = ""
 
     def update(self, ego: EgoFrame, others_ids, others_xy, others_yaw, others_len, others_wid, others_ped, time_s: float) -> StepEvents:
-        """Detect this step's events; ``others_*`` are (K,) arrays of the other actors."""
+        """Detect this step's events; ``others_*`` are (K,) arrays of the other actors, ``time_s`` [s]."""
         ev = StepEvents()
+        heading = np.array([np.cos(ego.yaw), np.sin(ego.yaw)])
         box = box_corners(ego.xy[None], np.array([ego.yaw]), np.array([ego.length]), np.array([ego.width]))[0]
         near = np.hypot(*(others_xy - ego.xy).T) < (ego.length + others_len) if len(others_ids) else np.zeros(0, bool)
         touching = set()
@@ -102,25 +173,47 @@ class InfractionDetector:
         ev.collided_with = tuple(sorted(touching - self._touching))
         self._touching = frozenset(touching)
 
-        points = footprint_points(ego.xy, ego.yaw, ego.length, ego.width)
-        lane, direction, in_junction = self.locator.locate(points, prefer_edge=ego.edge)
-        heading = np.array([np.cos(ego.yaw), np.sin(ego.yaw)])
-        on_lane = lane >= 0
-        against = on_lane & ~in_junction & (direction @ heading < 0.0)
-        wrong = against.mean() > WRONG_LANE_FRACTION
-        off = (~on_lane & ~in_junction).mean() > OFF_ROAD_FRACTION
-        ev.wrong_lane = int(wrong and not self._wrong)
-        ev.off_road = int(off and not self._off)
-        self._wrong, self._off = wrong, off
+        moved_m = 0.0 if self._xy is None else float(np.hypot(*(ego.xy - self._xy)))
+        wrong, off = self._lane_state(ego, heading)
+        ev.wrong_lane = self._wrong.update(wrong, moved_m, time_s)
+        ev.off_road = self._off.update(off, moved_m, time_s)
 
-        previous, self._light = self._light, ego.light
-        if previous is not None:
-            moved_on = ego.light is None or ego.light[:2] != previous[:2] or ego.light[2] > previous[2] + 1.0
-            if moved_on and previous[2] <= STOP_LINE_REACH_M and previous[3] in RED_STATES:
-                ev.red_light = 1
+        front = ego.xy + heading * (ego.length / 2)
+        ran = self._ran_red(self._front, front, ego.stop_line) if self._front is not None else ""
+        ev.red_light = int(bool(ran))
+        following = ego.stop_line.lane if ego.stop_line is not None else ""
+        self._red_lane = ran or (self._red_lane if following == self._red_lane else "")
+        self._xy, self._front, self._stop_line = ego.xy, front, ego.stop_line
 
         ev.goal_reached = bool(np.hypot(*(ego.xy - self.goal_xy)) <= self.success_radius_m)
         ev.timeout = time_s >= self.timeout_s
         for kind in EVENT_KINDS:
             self.totals[kind] += getattr(ev, kind)
         return ev
+
+    def _lane_state(self, ego: EgoFrame, heading: np.ndarray) -> tuple[bool | None, bool | None]:
+        """(wrong lane, off-road) of the footprint now; (None, None) while it is mostly in a junction."""
+        points = footprint_points(ego.xy, ego.yaw, ego.length, ego.width)
+        lane, direction, in_junction = self.locator.locate(points, prefer_edge=ego.edge)
+        judged = ~in_junction
+        n = int(judged.sum())
+        if n <= (1.0 - JUNCTION_HOLD_FRACTION) * len(points):
+            return None, None
+        on_lane = lane >= 0
+        against = judged & on_lane & (direction @ heading < 0.0)
+        off = judged & ~on_lane
+        return bool(against.sum() > WRONG_LANE_FRACTION * n), bool(off.sum() > OFF_ROAD_FRACTION * n)
+
+    def _ran_red(self, front_before: np.ndarray, front: np.ndarray, line: StopLine | None) -> str:
+        """The lane whose red stop line the front bumper's move crossed, else "".
+
+        The line followed before the step is judged with the signal it showed then; a different line
+        followed now (a lane change onto it during the step) with its signal now. A line already run
+        is not counted again while the car still follows it (stopping on it, rolling back over it)."""
+        lines = [self._stop_line] if self._stop_line is not None else []
+        if line is not None and (not lines or line.lane != lines[0].lane):
+            lines.append(line)
+        for ln in lines:
+            if ln.lane != self._red_lane and ln.signal in RED_STATES and crosses_line(front_before, front, ln.ends, ln.direction):
+                return ln.lane
+        return ""

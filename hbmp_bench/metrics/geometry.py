@@ -1,4 +1,4 @@
-"""Footprint geometry for the detectors: oriented boxes, overlap tests, lane lookup. Pure numpy."""
+"""Footprint geometry for the detectors: oriented boxes, overlap tests, lane lookup, stop lines. Pure numpy."""
 
 from __future__ import annotations
 
@@ -54,6 +54,33 @@ def footprint_points(xy: np.ndarray, yaw: float, length: float, width: float, n_
     return out
 
 
+def stop_line_of(lane_shape: np.ndarray, lane_width: float) -> tuple[np.ndarray, np.ndarray]:
+    """The stop line at the end of a lane: its ends (2, 2) [m] (right end, then left end, seen in the
+    direction of travel) and the unit travel direction (2,) there. The line runs across the lane's full
+    ``lane_width`` [m], perpendicular to the lane's last shape segment ``lane_shape`` (N, 2) [m]."""
+    end = lane_shape[-1]
+    seg = lane_shape[-1] - lane_shape[-2]
+    direction = seg / max(math.hypot(seg[0], seg[1]), 1e-9)
+    left = np.array([-direction[1], direction[0]]) * (lane_width / 2)
+    return np.stack([end - left, end + left]), direction
+
+
+def crosses_line(p: np.ndarray, q: np.ndarray, ends: np.ndarray, direction: np.ndarray) -> bool:
+    """True when the move ``p`` → ``q`` (2,) [m] crosses the line segment ``ends`` (2, 2) [m] forwards.
+
+    Forwards: ``p`` strictly behind the line and ``q`` on or past it along ``direction`` (2,), the unit
+    normal of the line; the crossing point must lie on the segment (ends included). Exact for any step
+    length, so a fast mover cannot jump over the line between two samples."""
+    before = float((p - ends[0]) @ direction)
+    after = float((q - ends[0]) @ direction)
+    if not (before < 0.0 <= after):
+        return False
+    x = p + (q - p) * (before / (before - after))
+    span = ends[1] - ends[0]
+    along = float((x - ends[0]) @ span) / max(float(span @ span), 1e-18)
+    return 0.0 <= along <= 1.0
+
+
 def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     """Even-odd ray test of points (P, 2) against a closed polygon (N, 2) → (P,) bool."""
     x, y = points[:, 0:1], points[:, 1:2]
@@ -68,10 +95,12 @@ class LaneLocator:
     """Which drivable lane (and which way it runs) lies under given points.
 
     Built once per network: every segment of every normal drivable lane with its half width and
-    unit direction, plus junction polygons (where internal lanes run).
+    unit direction, plus junction polygons (where internal lanes run); stop lines on demand.
     """
 
     def __init__(self, net: RoadNetwork):
+        self.net = net
+        self._stop_lines: dict[tuple[str, str | None], tuple | None] = {}
         starts, ends, half, lane_ids = [], [], [], []
         names = list(net.lanes)
         for k, lane_id in enumerate(names):
@@ -96,6 +125,30 @@ class LaneLocator:
         self.junctions = list(net.junction_shapes.values())
         self.junction_lo = np.array([j.min(0) for j in self.junctions]).reshape(-1, 2)
         self.junction_hi = np.array([j.max(0) for j in self.junctions]).reshape(-1, 2)
+
+    def stop_line(self, lane_id: str, next_edge: str | None) -> tuple[np.ndarray, np.ndarray, str, int] | None:
+        """The signalised stop line at the end of the normal lane ``lane_id`` on the way to ``next_edge``.
+
+        The link is the lane's link onto ``next_edge``, else the lane's first link (where a lane that
+        does not continue the route leads, as :meth:`RoadNetwork.follow`). Returns (ends (2, 2) [m],
+        travel direction (2,), tls id, link index), or None where that link has no traffic light or
+        the lane is unknown (cached per (lane, next edge))."""
+        key = (lane_id, next_edge)
+        if key not in self._stop_lines:
+            self._stop_lines[key] = self._find_stop_line(lane_id, next_edge)
+        return self._stop_lines[key]
+
+    def _find_stop_line(self, lane_id: str, next_edge: str | None):
+        lane = self.net.lanes.get(lane_id)
+        if lane is None:
+            return None
+        options = self.net.lane_next.get(lane_id, ())
+        to_edge = next((edge for _, edge in options if edge == next_edge), options[0][1] if options else None)
+        link = next((c for c in self.net.connections.get(lane.edge, ()) if c.from_lane == lane_id and c.to_edge == to_edge), None)
+        if link is None or not link.tls or link.link_index < 0:
+            return None
+        ends, direction = stop_line_of(lane.shape, lane.width)
+        return ends, direction, link.tls, link.link_index
 
     def segment_is_edge(self, segments: np.ndarray, edge: str) -> np.ndarray:
         """(len(segments),) bool: which of the given segment indices belong to lanes of ``edge``."""

@@ -16,11 +16,13 @@ PENALTIES = {
 """CARLA Leaderboard 1.0 infraction penalty factors (multiplied once per event)."""
 
 AGENT_ERROR = "agent_error"
-"""end_reason of an episode whose agent raised, hung past the decision timeout, died or returned
-an invalid action: a failed episode of that agent."""
+"""end_reason of an episode whose agent raised, hung past the decision timeout, died, broke the
+channel's protocol (a malformed, oversized or unsolicited reply) or returned an invalid action:
+a failed episode of that agent (success false, driving score 0), counted in every table."""
 SIM_ERROR = "sim_error"
 """end_reason of an episode the simulation could not finish (SUMO error, crash, watchdog) even
-after a retry: not the agent's fault; a resumed evaluation runs it again."""
+after a retry: not counted as the agent's episode, but shown as a count in every report; a
+resumed evaluation runs it again, and a leaderboard entry with one is not ranked."""
 DECISION_CAP = "decision_cap"
 """end_reason of an episode stopped after a fixed number of decisions (smoke runs)."""
 END_REASON_ERRORS = (AGENT_ERROR, SIM_ERROR, DECISION_CAP)
@@ -82,10 +84,15 @@ def driving_score(route_completion: float, counts: dict[str, int], off_route_fra
     return 100.0 * route_completion * penalty
 
 
+def record_line(record: EpisodeRecord) -> str:
+    """The JSON line ``append_record`` writes for ``record`` (newline included)."""
+    return json.dumps(record.to_dict(), sort_keys=True) + "\n"
+
+
 def append_record(path: str | Path, record: EpisodeRecord) -> None:
     """Append one record as a single JSON line, flushed and fsynced (a crash never leaves half a line
     that ``read_records`` would accept)."""
-    line = json.dumps(record.to_dict(), sort_keys=True) + "\n"
+    line = record_line(record)
     with open(path, "a", encoding="utf-8") as fh:
         fh.write(line)
         fh.flush()
@@ -122,13 +129,18 @@ def latest_per_key(records: Iterable[EpisodeRecord]) -> list[EpisodeRecord]:
 
 def read_records(path: str | Path) -> list[EpisodeRecord]:
     """Records of a JSON-lines file; a torn last line (from a kill mid-write) is ignored."""
+    with open(path, encoding="utf-8") as fh:
+        return parse_records(fh)
+
+
+def parse_records(lines: Iterable[str]) -> list[EpisodeRecord]:
+    """Records of JSON lines (``read_records`` without the file); lines that are not JSON are skipped."""
     names = {f.name for f in fields(EpisodeRecord)}
     out = []
-    with open(path, encoding="utf-8") as fh:
-        for line in fh:
-            try:
-                row = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            out.append(EpisodeRecord(**{k: v for k, v in row.items() if k in names}))
+    for line in lines:
+        try:
+            row = json.loads(line)
+        except json.JSONDecodeError:
+            continue
+        out.append(EpisodeRecord(**{k: v for k, v in row.items() if k in names}))
     return out

@@ -3,8 +3,9 @@
 Input is one or more *result sets*: JSON-lines records files (or folders of them). Each set is
 labelled by its agent (plus the fidelity when sets differ in it, plus the folder when two sets
 would share a label). Per episode key the last record wins. Episodes recorded as ``sim_error``
-(not the agent's fault) or ``decision_cap`` (smoke runs) are left out of every view and counted
-in ``coverage``.
+(the simulator failed, not the agent) or ``decision_cap`` (smoke runs) are not scored; the sim
+errors are shown as a ``sim_errors`` count in ``failures``, ``driving`` and ``coverage`` and at
+the top of ``report.md``. ``agent_error`` episodes are the agent's failures and count everywhere.
 
 Views (``build_report``):
     success        success % in the paper's layout: task rows × town columns; with several sets
@@ -16,6 +17,9 @@ Views (``build_report``):
     driving        CARLA Leaderboard driving score and route completion (means over episodes, %),
                    per (set, town) and over all towns.
     km_between     km driven per infraction event, per set and kind (inf: no such event).
+    route_length   per (set, town, task) the distance driven ÷ route length of the episodes that
+                   reached the goal (median, min, max): about 1 when route lengths are what a
+                   car drives, since the goal is reached within a couple of metres.
     coverage       per set: episodes in the views, sim errors left out, agent errors.
 """
 
@@ -135,48 +139,58 @@ def success_table(df: pd.DataFrame) -> pd.DataFrame:
 
 
 def failure_counts(df: pd.DataFrame) -> pd.DataFrame:
-    """Episodes per outcome (``OUTCOMES`` columns plus ``episodes``), index (result_set, town)."""
-    df = scored(df)
-    outcome = pd.DataFrame({
-        "result_set": df["result_set"],
-        "town": df["town"],
-        "episodes": 1,
-        "success": df["success"].astype(bool),
-        "wrong_lane": (df["wrong_lane"] + df["off_road"]) > 0,
-        "collision": (df["collision_vehicle"] + df["collision_pedestrian"] + df["collision_other"]) > 0,
-        "red_light": df["red_light"] > 0,
-        "timeout": df["timeout"].astype(bool),
-        "agent_error": df["end_reason"] == AGENT_ERROR,
-    })
-    counts = outcome.groupby(["result_set", "town"], sort=False).sum().astype(int)
-    order = [(s, t) for s in _sets(df) for t in _towns(df) if (s, t) in counts.index]
-    return counts.loc[order, ["episodes", *OUTCOMES]]
+    """Episodes per outcome (``OUTCOMES`` columns plus ``episodes``), index (result_set, town), and
+    ``sim_errors``: episodes not scored because the simulator failed (a town whose episodes all
+    ended so has a row with 0 episodes)."""
+    rows = []
+    for result_set in _sets(df):
+        for town in _towns(df):
+            everything = df[(df["result_set"] == result_set) & (df["town"] == town)]
+            if everything.empty:
+                continue
+            part = scored(everything)
+            rows.append({
+                "result_set": result_set, "town": town, "episodes": len(part),
+                "success": int(part["success"].astype(bool).sum()),
+                "wrong_lane": int(((part["wrong_lane"] + part["off_road"]) > 0).sum()),
+                "collision": int(((part["collision_vehicle"] + part["collision_pedestrian"]
+                                   + part["collision_other"]) > 0).sum()),
+                "red_light": int((part["red_light"] > 0).sum()),
+                "timeout": int(part["timeout"].astype(bool).sum()),
+                "agent_error": int((part["end_reason"] == AGENT_ERROR).sum()),
+                "sim_errors": int((everything["end_reason"] == SIM_ERROR).sum()),
+            })
+    columns = ["result_set", "town", "episodes", *OUTCOMES, "sim_errors"]
+    return pd.DataFrame(rows, columns=columns).set_index(["result_set", "town"])
 
 
 def driving_table(df: pd.DataFrame) -> pd.DataFrame:
     """Per (result_set, town) and (result_set, ``all``): episodes, success %, mean driving score
-    (CARLA Leaderboard, 0–100) and mean route completion %."""
-    df = scored(df)
+    (CARLA Leaderboard, 0–100), mean route completion % (NaN without scored episodes) and the
+    sim errors left out."""
     rows = []
     for result_set in _sets(df):
-        part = df[df["result_set"] == result_set]
-        for town, group in [*part.groupby("town"), ("all", part)]:
+        everything = df[df["result_set"] == result_set]
+        towns = [(town, everything[everything["town"] == town]) for town in _towns(everything)]
+        for town, group in [*towns, ("all", everything)]:
+            part = scored(group)
             rows.append({
-                "result_set": result_set, "town": town, "episodes": len(group),
-                "success_pct": round(100.0 * group["success"].mean(), 1),
-                "driving_score": round(float(group["driving_score"].mean()), 2),
-                "route_completion_pct": round(100.0 * float(group["route_completion"].mean()), 1),
+                "result_set": result_set, "town": town, "episodes": len(part),
+                "sim_errors": int((group["end_reason"] == SIM_ERROR).sum()),
+                "success_pct": round(100.0 * float(part["success"].mean()), 1),
+                "driving_score": round(float(part["driving_score"].mean()), 2),
+                "route_completion_pct": round(100.0 * float(part["route_completion"].mean()), 1),
             })
-    return pd.DataFrame(rows).set_index(["result_set", "town"])
+    columns = ["result_set", "town", "episodes", "sim_errors", "success_pct", "driving_score", "route_completion_pct"]
+    return pd.DataFrame(rows, columns=columns).set_index(["result_set", "town"])
 
 
 def km_between_infractions(df: pd.DataFrame) -> pd.DataFrame:
     """Per result set: km driven and km per event of each kind in ``INFRACTIONS`` plus ``any``
     (CoRL2017's "average distance between infractions"); inf where no such event happened."""
-    df = scored(df)
     rows = []
     for result_set in _sets(df):
-        part = df[df["result_set"] == result_set]
+        part = scored(df[df["result_set"] == result_set])
         km = float(part["distance_m"].sum()) / 1000.0
         counts = {
             "collision": int((part["collision_vehicle"] + part["collision_pedestrian"] + part["collision_other"]).sum()),
@@ -186,7 +200,27 @@ def km_between_infractions(df: pd.DataFrame) -> pd.DataFrame:
         row = {"result_set": result_set, "km_driven": round(km, 3)}
         row.update({kind: (round(km / n, 3) if n else math.inf) for kind, n in counts.items()})
         rows.append(row)
-    return pd.DataFrame(rows).set_index("result_set")
+    return pd.DataFrame(rows, columns=["result_set", "km_driven", *INFRACTIONS, "any"]).set_index("result_set")
+
+
+def route_length_check(df: pd.DataFrame) -> pd.DataFrame:
+    """Per (result_set, town, task): episodes that reached the goal and their distance driven ÷
+    route length (median, min, max). An agent that drives to the goal covers the route's length, so
+    the ratio checks the route lengths that timeouts and route completion rest on."""
+    df = scored(df)
+    goals = df[df["success"].astype(bool) & (df["route_length_m"] > 0)]
+    rows = []
+    for (result_set, town, task), group in goals.groupby(["result_set", "town", "task"], sort=False):
+        ratio = group["distance_m"] / group["route_length_m"]
+        rows.append({"result_set": result_set, "town": town, "task": task, "goal_episodes": len(group),
+                     "distance_over_route_median": round(float(ratio.median()), 3),
+                     "distance_over_route_min": round(float(ratio.min()), 3),
+                     "distance_over_route_max": round(float(ratio.max()), 3)})
+    if not rows:
+        return pd.DataFrame()
+    sets = _sets(df)
+    rows.sort(key=lambda r: (sets.index(r["result_set"]), r["town"], TASKS.index(r["task"])))
+    return pd.DataFrame(rows).set_index(["result_set", "town", "task"])
 
 
 def coverage(df: pd.DataFrame) -> pd.DataFrame:
@@ -224,6 +258,7 @@ def build_report(source: pd.DataFrame | Sequence[str | os.PathLike]) -> Report:
         "failures": failure_counts(df),
         "driving": driving_table(df),
         "km_between": km_between_infractions(df),
+        "route_length": route_length_check(df),
         "coverage": coverage(df),
     })
 
@@ -301,6 +336,10 @@ def write_report(report: Report, out_dir: str | os.PathLike) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     written = []
     sections = ["# Evaluation report\n"]
+    sims = int(report["coverage"]["sim_errors_left_out"].sum()) if not report["coverage"].empty else 0
+    if sims:
+        sections.append(f"**{sims} episode(s) ended in a simulator error** (not the agent's fault): they are not "
+                        "scored in these tables (see `sim_errors`); evaluating again reruns them.\n")
     for name, view in report.views.items():
         written.append(_write_text(out / f"{name}.csv", view.to_csv()))
         markdown = to_markdown(view) if not view.empty else "(no episodes)\n"

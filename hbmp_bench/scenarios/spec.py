@@ -9,6 +9,13 @@ from dataclasses import asdict, dataclass, field
 TASKS: tuple[str, ...] = ("Straight", "OneTurn", "Navigation", "NavigationDynamic")
 """The CoRL2017 task categories, as used in env ids (``hbmp_bench/Town01-OneTurn-v0``)."""
 
+EPISODE_RULES_VERSION = 3
+"""Version of how a suite's episodes are drawn and measured, part of ``Suite.definition_hash`` so
+that records and leaderboard results of older episode lists never mix with current ones. Bump it
+whenever the episode lists or their route lengths / timeouts change. 2: route length is the length
+driven along the route's lanes, junction lanes included (1 left the junction lanes out). 3: routes
+are the shortest by that length (2 chose them by edge lengths alone)."""
+
 TASK_LABELS = {
     "Straight": "Straight",
     "OneTurn": "One turn",
@@ -70,8 +77,9 @@ class Suite:
             raise ValueError(f"unknown tasks {sorted(unknown)}; valid: {', '.join(TASKS)}")
 
     def definition_hash(self) -> str:
-        """Short hash of everything that defines the suite's episodes and rules."""
-        blob = json.dumps(asdict(self), sort_keys=True, default=list).encode()
+        """Short hash of everything that defines the suite's episodes and rules (its fields and
+        ``EPISODE_RULES_VERSION``)."""
+        blob = json.dumps({**asdict(self), "episode_rules": EPISODE_RULES_VERSION}, sort_keys=True, default=list).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
 
 
@@ -80,7 +88,10 @@ class Episode:
     """One fully specified episode: map, route, traffic, rules and seed.
 
     Positions are along SUMO lanes [m]; ``route`` is the edge sequence from the start edge
-    to the goal edge (the shortest route, the paper's A* global route).
+    to the goal edge (the shortest route, the paper's A* global route). ``route_length_m`` [m] is
+    the length driven from ``start_pos`` on ``start_lane`` to ``goal_pos``, along the route's
+    lanes and the junction lanes between them (``RoadNetwork.route_length``); ``timeout_s`` [s]
+    and route completion are measured against it.
     """
 
     suite: str

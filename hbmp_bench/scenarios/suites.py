@@ -143,8 +143,8 @@ def _road_length(town: str) -> float:
 
 
 @functools.lru_cache(maxsize=None)
-def _route_table(town: str) -> tuple[tuple[str, str, float, int, tuple[str, ...]], ...]:
-    """Every (start edge, goal edge, middle length [m], turns, route) of a town, sorted."""
+def _route_table(town: str) -> tuple[tuple[str, str, int, tuple[str, ...]], ...]:
+    """Every (start edge, goal edge, turns, route) of a town, sorted."""
     net = road_network(town)
     rows = []
     for source in net.drivable_edges:
@@ -153,8 +153,7 @@ def _route_table(town: str) -> tuple[tuple[str, str, float, int, tuple[str, ...]
             if target == source:
                 continue
             route = net.path_to(prev, source, target)
-            middle = dist[target] - net.edge_length[target]
-            rows.append((source, target, middle, net.count_turns(route), route))
+            rows.append((source, target, net.count_turns(route), route))
     return tuple(rows)
 
 
@@ -188,11 +187,12 @@ def sample_episode(
     """Draw one episode of ``task`` in ``town`` with ``rng``.
 
     Start and goal positions are drawn on the route's first and last edge; the route is the
-    shortest route between them. Routes whose length falls outside the task's band are
-    rejected; the band widens step by step if a small map has none.
+    shortest route between them. Its length is the length driven along its lanes from the start
+    lane to the goal lane, junction lanes included (``RoadNetwork.route_length``). Routes whose length falls
+    outside the task's band are rejected; the band widens step by step if a small map has none.
     """
     net = road_network(town)
-    rows = [r for r in _route_table(town) if _task_filter(task, r[3])]
+    rows = [r for r in _route_table(town) if _task_filter(task, r[2])]
     if not rows:
         raise ValueError(f"{town} has no route of task {task!r}")
     mean = _mean_length(town, task)
@@ -200,23 +200,24 @@ def sample_episode(
     for widen in range(8):
         factor = 1.0 + 0.5 * widen
         for _ in range(200):
-            source, target, middle, turns, route = rows[int(rng.integers(len(rows)))]
+            source, target, turns, route = rows[int(rng.integers(len(rows)))]
             start_len, goal_len = net.edge_length[source], net.edge_length[target]
-            start_pos = float(rng.uniform(0.1, 0.5) * start_len)
-            goal_pos = float(rng.uniform(0.3, 0.9) * goal_len)
-            length = start_len - start_pos + middle + goal_pos
+            start_pos = round(float(rng.uniform(0.1, 0.5) * start_len), 2)
+            goal_pos = round(float(rng.uniform(0.3, 0.9) * goal_len), 2)
+            start_lanes = net.edge_lanes[source]
+            start_lane, goal_lane = start_lanes[int(rng.integers(len(start_lanes)))], net.rightmost_lane(target)
+            length = net.route_length(route, start_pos, goal_pos, start_lane, goal_lane)
             if lo / factor * mean <= length <= hi * factor * mean:
-                start_lanes = net.edge_lanes[source]
                 return Episode(
                     suite=suite.name,
                     town=town,
                     task=task,
                     index=index,
                     seed=seed,
-                    start_lane=start_lanes[int(rng.integers(len(start_lanes)))],
-                    start_pos=round(start_pos, 2),
-                    goal_lane=net.rightmost_lane(target),
-                    goal_pos=round(goal_pos, 2),
+                    start_lane=start_lane,
+                    start_pos=start_pos,
+                    goal_lane=goal_lane,
+                    goal_pos=goal_pos,
                     route=route,
                     route_length_m=round(length, 2),
                     turns=turns,

@@ -20,10 +20,14 @@ under ``weights_only=True``.
 from __future__ import annotations
 
 import os
+import pickle
+import re
 import tempfile
 from typing import Any
 
 import torch
+
+from hbmp_bench.errors import UserError
 
 CHECKPOINT_FORMAT = "hbmp_bench.checkpoint.v1"
 KINDS = ("il", "hbmp", "hbmp-s", "flat")
@@ -69,15 +73,36 @@ def save_checkpoint(path: str, checkpoint: dict[str, Any]) -> None:
         raise
 
 
+class CheckpointError(UserError):
+    """A checkpoint file that cannot be used: refused by the weights-only loader, unreadable
+    (truncated, not a torch file), or not an hbmp_bench checkpoint of the expected kind."""
+
+
 def load_checkpoint(path: str, kinds: tuple[str, ...] = KINDS) -> dict[str, Any]:
-    """Read a checkpoint with ``weights_only=True``; its kind must be in ``kinds``."""
+    """Read a checkpoint with ``weights_only=True``; its kind must be in ``kinds``.
+
+    Raises:
+        FileNotFoundError: no file at ``path``.
+        CheckpointError: the file is refused, unreadable or of another kind (one line; torch's
+            error is the ``__cause__``).
+    """
     if not os.path.isfile(path):
         raise FileNotFoundError(f"no checkpoint file {path!r}")
-    checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+    try:
+        checkpoint = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - torch reports a damaged file with many exception types
+        refused = re.search(r"GLOBAL ([\w.]+)", str(exc)) if isinstance(exc, pickle.UnpicklingError) else None
+        if refused is not None:
+            raise CheckpointError(
+                f"checkpoint {path!r} is refused: it stores a Python object ({refused.group(1)}), and checkpoints "
+                "are read weights-only (tensors and plain values), so that loading one never runs code from the "
+                "file; write checkpoints with hbmp-bench train") from exc
+        raise CheckpointError(f"cannot read checkpoint {path!r}: the file is truncated, damaged or not a torch "
+                              f"checkpoint ({type(exc).__name__})") from exc
     if not isinstance(checkpoint, dict) or checkpoint.get("format") != CHECKPOINT_FORMAT:
-        raise ValueError(f"{path!r} is not an hbmp_bench checkpoint (format {CHECKPOINT_FORMAT})")
+        raise CheckpointError(f"{path!r} is not an hbmp_bench checkpoint (format {CHECKPOINT_FORMAT})")
     if checkpoint.get("kind") not in kinds:
-        raise ValueError(f"{path!r} holds a {checkpoint.get('kind')!r} policy; expected one of {kinds}")
+        raise CheckpointError(f"{path!r} holds a {checkpoint.get('kind')!r} policy; expected one of {kinds}")
     return checkpoint
 
 

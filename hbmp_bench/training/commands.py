@@ -18,6 +18,7 @@ import os
 import shlex
 import time
 
+from hbmp_bench.errors import Interrupted
 from hbmp_bench.training.checkpoints import KINDS
 
 DEFAULT_EPISODES = {"il": 3000, "hbmp": 6000, "hbmp-s": 6000, "flat": 6000}
@@ -86,20 +87,40 @@ def _cmd_train(args: argparse.Namespace) -> int:
     run = RunConfig(kind=kind, episodes=args.episodes, out=args.out, workers=args.workers, seed=args.seed,
                     save_every=args.save_every, resume=args.resume, command=_command_line(args),
                     progress=not args.no_progress)
-    if kind == "il":
-        from hbmp_bench.training.dagger import DaggerConfig, train_dagger
+    try:
+        if kind == "il":
+            from hbmp_bench.training.dagger import DaggerConfig, train_dagger
 
-        result = train_dagger(run, env_config, DaggerConfig(mask_actions=args.mask_actions))
-    else:
-        from hbmp_bench.training.ppo import PPOConfig, train_ppo
+            result = train_dagger(run, env_config, DaggerConfig(mask_actions=args.mask_actions))
+        else:
+            from hbmp_bench.training.ppo import PPOConfig, train_ppo
 
-        label = None if init is None else (args.init or "il")
-        result = train_ppo(run, env_config, PPOConfig(mask_actions=args.mask_actions), init=init, init_label=label)
+            label = None if init is None else (args.init or "il")
+            result = train_ppo(run, env_config, PPOConfig(mask_actions=args.mask_actions), init=init,
+                               init_label=label)
+    except KeyboardInterrupt:  # the trainer has closed its workers on the way out
+        raise Interrupted(_resume_hint(args)) from None
     p = result["progress"]
     print(f"trained {kind}: {p['episodes']} episodes, {p['decisions']} decisions, {p['wall_s'] / 60:.1f} min")
     print(f"run folder: {args.out}  (episodes.csv, curves.png, checkpoint.pt, MODEL_CARD.md)")
     print(f"policy: {result['policy']}  (evaluate: hbmp-bench run --agent {result['policy']})")
     return 0
+
+
+def _resume_hint(args: argparse.Namespace) -> str:
+    """What an interrupted ``train`` left and the command that continues it."""
+    from hbmp_bench.training.checkpoints import load_checkpoint
+
+    checkpoint = os.path.join(args.out, "checkpoint.pt")
+    if not os.path.isfile(checkpoint):
+        return (f"no checkpoint was written yet (one every {args.save_every} episodes); "
+                f"start over with another --out than {args.out}")
+    done = load_checkpoint(checkpoint, kinds=(args.kind,))["progress"]["episodes"]
+    if done >= args.episodes:
+        return (f"all {done} episodes are trained ({checkpoint}); {os.path.join(args.out, 'policy.pt')}, "
+                "the curves or the model card may be missing")
+    again = _command_line(argparse.Namespace(**{**vars(args), "resume": checkpoint}))
+    return f"the last checkpoint is {checkpoint} ({done} of {args.episodes} episodes); resume with: {again}"
 
 
 def _cmd_curves(args: argparse.Namespace) -> int:

@@ -1,5 +1,6 @@
 """Learned agents: shipped checkpoints, ``load_agent("path.pt")``, weights_only loading, clear errors."""
 
+import datetime
 import os
 from importlib import resources
 
@@ -8,7 +9,7 @@ import torch
 
 from hbmp_bench.agents import AGENTS, Agent, load_agent
 from hbmp_bench.agents import learned
-from hbmp_bench.training.checkpoints import save_checkpoint
+from hbmp_bench.training.checkpoints import CheckpointError, save_checkpoint
 from hbmp_bench.training.models import behavior_model_cfgs, build_model
 
 SHAPES = {"occupancy": [1, 64, 36], "road": [10], "action_mask": [5]}
@@ -74,6 +75,20 @@ def test_bad_files_are_clear_errors(tmp_path):
     with pytest.raises(ValueError, match="weights_only"):
         save_checkpoint(str(tmp_path / "x.pt"), {"kind": "il", "model": {"obs": object()}})
     assert not os.path.exists(tmp_path / "x.pt")
+
+
+def test_refused_and_damaged_files_are_checkpoint_errors(tmp_path):
+    """torch's own errors (whose text offers to load unsafely) stay the cause, out of the message."""
+    torch.save({"when": datetime.datetime(2026, 1, 1)}, tmp_path / "pickled.pt")
+    with pytest.raises(CheckpointError, match=r"is refused: it stores a Python object \(datetime.datetime\)") as err:
+        load_agent(str(tmp_path / "pickled.pt"))
+    assert "weights_only=False" not in str(err.value) and err.value.__cause__ is not None
+    good = _tiny_checkpoint(tmp_path / "good.pt")
+    data = open(good, "rb").read()
+    for name, content in (("cut.pt", data[: len(data) // 3]), ("text.pt", b"hello"), ("empty.pt", b"")):
+        (tmp_path / name).write_bytes(content)
+        with pytest.raises(CheckpointError, match="the file is truncated, damaged or not a torch checkpoint"):
+            load_agent(str(tmp_path / name))
 
 
 SHIPPED = [name for name in learned.TRAIN_COMMANDS

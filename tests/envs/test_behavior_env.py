@@ -55,9 +55,30 @@ def test_same_seed_same_episode_with_traffic():
 def test_out_of_range_action_is_a_clear_error():
     env = gym.make("hbmp_bench/Town02-Straight-v0", episode_index=0).unwrapped
     env.reset(seed=0)
-    for bad in (5, -1, 2.5, "left"):
+    for bad in (5, -1, 2.5, "left", np.array(True)):
         with pytest.raises(ValueError, match="action must be an int"):
             env.step(bad)
+    for bad in (True, False, np.True_):  # a bool is an int to Python, and to Discrete.contains, but no behavior
+        with pytest.raises(ValueError, match=r"action must be an int in \[0, 5\) .*got bool") as err:
+            env.step(bad)
+        assert "\n" not in str(err.value)
+    obs, *_ = env.step(np.int64(4))  # numpy ints stay valid
+    env.close()
+
+
+@pytest.mark.parametrize("env_id", ["hbmp_bench/Town01-Straight-v0", "hbmp_bench/Training-v0"])
+def test_unknown_density_fails_at_make_before_sumo_starts(env_id, monkeypatch):
+    from hbmp_bench.sim.sumo import SumoSim
+
+    def no_sumo(*args, **kwargs):
+        raise AssertionError("SUMO started")
+
+    monkeypatch.setattr(SumoSim, "start", no_sumo)
+    with pytest.raises(ValueError, match="unknown density 'x'; valid: corl, dense, empty, regular") as err:
+        gym.make(env_id, density="x")
+    assert "\n" not in str(err.value)
+    env = gym.make(env_id, density="dense")  # a valid one is accepted (and nothing starts either)
+    assert env.unwrapped.traffic.vehicles > 0
     env.close()
 
 

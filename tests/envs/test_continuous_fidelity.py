@@ -92,10 +92,15 @@ def test_render_returns_frames_between_decisions():
 
 @pytest.mark.slow
 def test_route_is_replanned_only_once_lane_changes_are_closed():
-    """Town05 One turn, episode 1 starts in a lane that does not continue the route: the route
+    """A Town05 One turn episode that starts in a lane that does not continue the route: the route
     stays (the agent can still change lanes) until the lane's last metres, where it is re-planned
     from where that lane leads."""
-    env = BehaviorEnv(town="Town05", task="OneTurn", episode_index=1, fidelity="event")
+    from hbmp_bench.scenarios import road_network, suite_episodes
+
+    net = road_network("Town05")
+    index = next(ep.index for ep in suite_episodes("corl2017", "Town05", "OneTurn")
+                 if ep.start_lane not in net.lanes_to(ep.route[0], ep.route[1]))
+    env = BehaviorEnv(town="Town05", task="OneTurn", episode_index=index, fidelity="event")
     env.reset(seed=1)
     world = env.world
     original = world.route

@@ -1,6 +1,8 @@
 """The agent runs in its own process: failures are recorded per episode, the run goes on, and the
 agent cannot reach the simulation."""
 
+from pathlib import Path
+
 import pytest
 
 from hbmp_bench.evaluation import EpisodePool, Job, RunnerLimits, evaluate, run_job, suite_tasks
@@ -42,15 +44,15 @@ def test_mixed_failures_in_one_pool_then_a_good_agent_still_drives():
     assert "invalid action 7 at decision 0" in by_agent["InvalidActionAgent"].error
     assert "action must be an integer or a 1-D vector of numbers, got float 1.5" in by_agent["FloatActionAgent"].error
     assert "agent process exited" in by_agent["DyingAgent"].error
-    assert "could not be built" in by_agent["BrokenInitAgent"].error
+    assert "agent could not be built" in by_agent["BrokenInitAgent"].error
     assert "weights file missing" in by_agent["BrokenInitAgent"].error
     for name in ("InvalidActionAgent", "FloatActionAgent", "DyingAgent", "BrokenInitAgent"):
         assert by_agent[name].end_reason == AGENT_ERROR and not by_agent[name].success
     assert by_agent["expert"].success and by_agent["expert"].error == ""
 
 
-def test_an_agent_importing_the_simulator_cannot_move_the_ego(tmp_path, monkeypatch):
-    log = tmp_path / "cheat.log"
+def test_an_agent_importing_the_simulator_cannot_move_the_ego(tmp_path, monkeypatch, agent_dir):
+    log = Path(agent_dir) / "cheat.log"
     monkeypatch.setenv("HBMP_TEST_CHEAT_LOG", str(log))
     # In this process the same cheat works: the agent shares libsumo with the simulation.
     (inline,), _, _ = run_job(Job("corl2017", "Town01", "Straight", "misbehaving_agents:CheatingAgent", (0,), "event"))

@@ -48,8 +48,12 @@ def test_smoke_config_rejects_bad_options():
         SmokeConfig(episode=99)
 
 
-def test_the_three_line_test_of_an_agent_author(tmp_path):
-    """A fresh pytest run finds the fixture through the entry point and reports a bad agent readably."""
+def test_the_three_line_test_of_an_agent_author(readable_dir):
+    """A fresh pytest run finds the fixture through the entry point and reports a bad agent readably.
+
+    The folder is readable by everyone: run as root, the agent process imports the author's module
+    as an unprivileged user."""
+    tmp_path = readable_dir
     (tmp_path / "author_agents.py").write_text(textwrap.dedent("""
         class Good:
             name = "good"

@@ -68,8 +68,9 @@ def test_failure_counts_count_episodes_per_outcome(two_sets):
     counts = failure_counts(two_sets)
     a1 = counts.loc[("a", "Town01")]
     assert a1.to_dict() == {"episodes": 3, "success": 2, "wrong_lane": 1, "collision": 1, "red_light": 1,
-                            "timeout": 1, "agent_error": 0}
+                            "timeout": 1, "agent_error": 0, "sim_errors": 0}
     assert counts.loc[("a", "Town02"), "agent_error"] == 1 and counts.loc[("a", "Town02"), "episodes"] == 2
+    assert counts.loc[("a", "Town02"), "sim_errors"] == 1  # not scored, but shown
     assert list(counts.index) == [("a", "Town01"), ("a", "Town02"), ("b", "Town01"), ("b", "Town02")]
 
 
@@ -123,3 +124,22 @@ def test_records_keep_reading_old_lines_without_the_error_field(tmp_path):
     (record,) = read_records(path)
     assert record.error == "" and record.key == ("corl2017", "Town01", "Straight", 0, "a", "event")
     assert latest_per_key([record, dataclasses.replace(record, success=False)])[0].success is False
+
+
+def test_route_length_view_takes_the_episodes_that_reached_the_goal():
+    from hbmp_bench.metrics.report import route_length_check
+
+    df = records_frame([
+        rec(episode=0, distance_m=510.0), rec(episode=1, distance_m=680.0), rec(episode=2, distance_m=495.0),
+        failed(episode=3, distance_m=900.0),
+        rec(task="OneTurn", episode=0, distance_m=250.0, route_length_m=200.0),
+    ])
+    view = route_length_check(df)
+    assert list(view.index) == [("a", "Town01", "Straight"), ("a", "Town01", "OneTurn")]
+    straight = view.loc[("a", "Town01", "Straight")]
+    assert straight["goal_episodes"] == 3
+    assert straight["distance_over_route_median"] == pytest.approx(1.02)
+    assert straight["distance_over_route_min"] == pytest.approx(0.99)
+    assert straight["distance_over_route_max"] == pytest.approx(1.36)
+    assert view.loc[("a", "Town01", "OneTurn"), "distance_over_route_median"] == pytest.approx(1.25)
+    assert "route_length" in build_report(df).views

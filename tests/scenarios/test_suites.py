@@ -35,11 +35,22 @@ def test_corl_timeout_is_route_length_at_10_kmh_plus_10_s():
         assert ep.timeout_s == pytest.approx(ep.route_length_m / (10 / 3.6) + 10.0, abs=0.06)
 
 
-def test_route_length_matches_lane_graph():
-    net = road_network("Town01")
-    for ep in suite_episodes("corl2017", "Town01", "OneTurn")[:5]:
+@pytest.mark.parametrize("town", ["Town01", "Town03"])
+def test_route_length_matches_lane_graph(town):
+    net = road_network(town)
+    for ep in suite_episodes("corl2017", town, "OneTurn")[:5]:
         assert ep.route == net.shortest_route(ep.route[0], ep.route[-1])
-        assert ep.route_length_m == pytest.approx(net.route_length(ep.route, ep.start_pos, ep.goal_pos), abs=0.02)
+        length = net.route_length(ep.route, ep.start_pos, ep.goal_pos, ep.start_lane, ep.goal_lane)
+        assert ep.route_length_m == pytest.approx(length, abs=0.01)
+
+
+def test_suite_hash_changes_with_the_episode_rules(monkeypatch):
+    from hbmp_bench.scenarios import spec
+
+    suite = get_suite("corl2017")
+    before = suite.definition_hash()
+    monkeypatch.setattr(spec, "EPISODE_RULES_VERSION", spec.EPISODE_RULES_VERSION + 1)
+    assert suite.definition_hash() != before
 
 
 def test_every_town_and_task_has_a_full_list():

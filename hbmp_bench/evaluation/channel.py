@@ -1,0 +1,335 @@
+"""The channel between the env process and the agent process, and the data-only codec of the agent's replies.
+
+The two processes share a connected Unix stream socket. Every message is one *frame*: a 4-byte
+big-endian length, then that many bytes.
+
+env → agent (requests): pickled tuples ``("reset", info)`` and ``("act", observation, info)``.
+    Pickle is safe in this direction only: the env process is trusted, and the agent process
+    unpickling what the env sends can harm nothing but the agent.
+
+agent → env (replies): never pickle. The env process decodes a reply with ``struct`` and
+    ``numpy.frombuffer`` and a length-capped UTF-8 decode, none of which can run code:
+
+    ========  ==========================================  =====================================
+    tag       body                                        meaning
+    ========  ==========================================  =====================================
+    ``R``     UTF-8 JSON, ≤ ``MAX_TEXT_BYTES``            ready: the agent is built; the JSON
+                                                          describes it (``AgentDescription``)
+    ``E``     UTF-8 text, ≤ ``MAX_TEXT_BYTES``            the agent raised; the text says what
+    ``K``     empty                                       ``reset`` done
+    ``A``     little-endian int64                         a discrete action
+    ``V``     1 … ``MAX_VECTOR`` little-endian float64    a continuous action (control agents)
+    ========  ==========================================  =====================================
+
+    Anything else (an unknown tag, a wrong body length, a frame over ``MAX_REPLY_BYTES``, a
+    second reply to one request, invalid UTF-8 or JSON, a JSON document off the schema) is a
+    ``ProtocolError``: the agent's error.
+
+The env side reads and writes with deadlines (``EnvEnd``): an agent that stops reading its
+requests, sends half a frame and stalls, or never answers cannot block the env process, which
+keeps sending heartbeats while it waits.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import pickle
+import socket
+import struct
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+MAX_TEXT_BYTES = 16 * 1024
+"""Longest text body (ready description, error message) of a reply [bytes]."""
+MAX_VECTOR = 64
+"""Most floats in a continuous action."""
+MAX_REPLY_BYTES = 1 + max(MAX_TEXT_BYTES, 8 * MAX_VECTOR)
+"""Longest reply frame the env process accepts [bytes]; a longer one is the agent's error."""
+MAX_DESCRIPTION_ITEMS = 16
+"""Most ``env_kwargs`` entries in a ready description."""
+MAX_NAME_CHARS = 200
+"""Longest ``env_factory``, option name or fingerprint in a ready description [characters]."""
+
+_HEADER = struct.Struct("!I")
+_INT = struct.Struct("<q")
+
+READY, ERROR, OK, ACTION = "ready", "error", "ok", "action"
+"""Kinds of a decoded reply."""
+
+
+class ProtocolError(Exception):
+    """The agent broke the channel's protocol (the message says how): the agent's fault."""
+
+
+class ChannelClosed(Exception):
+    """The other end closed the channel (its process exited or closed the socket)."""
+
+
+class ChannelTimeout(Exception):
+    """The other end did not read or write within the deadline."""
+
+
+@dataclass(frozen=True)
+class AgentDescription:
+    """What a built agent says about itself in its ready reply.
+
+    Attributes:
+        env_factory: ``module:callable`` of the env the agent needs (the flat baseline's control
+            env); None for the behavior env. The evaluator accepts only known factories.
+        env_kwargs: env options as sorted ``(name, value)`` pairs, values JSON scalars.
+        fingerprint: the agent's checkpoint hash ("" when it has none).
+    """
+
+    env_factory: str | None = None
+    env_kwargs: tuple[tuple[str, str | int | float | bool | None], ...] = ()
+    fingerprint: str = ""
+
+    def to_json(self) -> str:
+        return json.dumps({"env_factory": self.env_factory, "env_kwargs": dict(self.env_kwargs),
+                           "fingerprint": self.fingerprint}, sort_keys=True)
+
+    @classmethod
+    def of(cls, agent: Any) -> "AgentDescription":
+        """The description of a built agent (from its ``env_factory``, ``env_kwargs`` and
+        ``fingerprint`` attributes); raises ValueError when they do not fit the schema."""
+        factory = getattr(agent, "env_factory", None)
+        kwargs = dict(getattr(agent, "env_kwargs", None) or {})
+        return parse_description(json.dumps({"env_factory": factory, "env_kwargs": kwargs,
+                                             "fingerprint": str(getattr(agent, "fingerprint", "") or "")}))
+
+
+def parse_description(text: str) -> AgentDescription:
+    """An ``AgentDescription`` from its JSON text; raises ValueError for anything off the schema
+    (unknown keys, wrong types, non-finite numbers, too many or too long entries)."""
+    try:
+        doc = json.loads(text, parse_constant=_reject_constant)
+    except (json.JSONDecodeError, RecursionError) as exc:
+        raise ValueError(f"not JSON: {exc}") from None
+    if not isinstance(doc, dict) or set(doc) != {"env_factory", "env_kwargs", "fingerprint"}:
+        raise ValueError("want a JSON object with exactly env_factory, env_kwargs and fingerprint")
+    factory, kwargs, fingerprint = doc["env_factory"], doc["env_kwargs"], doc["fingerprint"]
+    if factory is not None and not (isinstance(factory, str) and 0 < len(factory) <= MAX_NAME_CHARS):
+        raise ValueError(f"env_factory must be null or a string of at most {MAX_NAME_CHARS} characters")
+    if not isinstance(fingerprint, str) or len(fingerprint) > MAX_NAME_CHARS:
+        raise ValueError(f"fingerprint must be a string of at most {MAX_NAME_CHARS} characters")
+    if not isinstance(kwargs, dict) or len(kwargs) > MAX_DESCRIPTION_ITEMS:
+        raise ValueError(f"env_kwargs must be an object of at most {MAX_DESCRIPTION_ITEMS} entries")
+    for name, value in kwargs.items():
+        if len(name) > MAX_NAME_CHARS:
+            raise ValueError(f"env_kwargs names must have at most {MAX_NAME_CHARS} characters")
+        if not (value is None or isinstance(value, (str, int, float, bool))):
+            raise ValueError(f"env_kwargs[{name!r}] must be a JSON scalar, got {type(value).__name__}")
+        if isinstance(value, str) and len(value) > MAX_NAME_CHARS:
+            raise ValueError(f"env_kwargs[{name!r}] must have at most {MAX_NAME_CHARS} characters")
+    return AgentDescription(factory, tuple(sorted(kwargs.items())), fingerprint)
+
+
+def _reject_constant(name: str):
+    raise ValueError(f"{name} is not allowed")
+
+
+# ---------------------------------------------------------------------------------------------- codec
+
+
+def text_body(text: str) -> bytes:
+    """``text`` as UTF-8, cut to ``MAX_TEXT_BYTES`` on a character boundary."""
+    data = text.encode("utf-8", errors="replace")
+    if len(data) > MAX_TEXT_BYTES:
+        data = data[:MAX_TEXT_BYTES].decode("utf-8", errors="ignore").encode("utf-8")
+    return data
+
+
+def encode_ready(description: AgentDescription) -> bytes:
+    return b"R" + text_body(description.to_json())
+
+
+def encode_error(text: str) -> bytes:
+    return b"E" + text_body(text)
+
+
+def encode_ok() -> bytes:
+    return b"K"
+
+
+def encode_action(action: int | tuple[float, ...]) -> bytes:
+    """An action from ``agent_process.as_action`` as a reply; raises ValueError when it cannot be
+    sent (an integer outside int64, more than ``MAX_VECTOR`` floats)."""
+    if isinstance(action, int):
+        try:
+            return b"A" + _INT.pack(action)
+        except struct.error:
+            raise ValueError(f"integer action {action} does not fit in 64 bits") from None
+    if not 0 < len(action) <= MAX_VECTOR:
+        raise ValueError(f"a vector action has 1 to {MAX_VECTOR} entries, got {len(action)}")
+    return b"V" + np.asarray(action, dtype="<f8").tobytes()
+
+
+@dataclass(frozen=True)
+class Reply:
+    """A decoded reply: ``kind`` one of ``READY``, ``ERROR``, ``OK``, ``ACTION``; ``value`` an
+    ``AgentDescription``, the error text, None, or the action (int, or tuple of floats)."""
+
+    kind: str
+    value: Any = None
+
+
+def decode_reply(frame: bytes) -> Reply:
+    """Decode one reply frame; raises ``ProtocolError`` for anything that is not one of the
+    formats in the module docstring. Runs no code from the frame."""
+    if not frame:
+        raise ProtocolError("empty reply")
+    if len(frame) > MAX_REPLY_BYTES:
+        raise ProtocolError(f"reply of {len(frame)} bytes, the limit is {MAX_REPLY_BYTES}")
+    tag, body = frame[:1], frame[1:]
+    if tag in (b"R", b"E"):
+        try:
+            text = body.decode("utf-8")
+        except UnicodeDecodeError as exc:
+            raise ProtocolError(f"reply text is not UTF-8 ({exc.reason} at byte {exc.start})") from None
+        if tag == b"E":
+            return Reply(ERROR, text)
+        try:
+            return Reply(READY, parse_description(text))
+        except ValueError as exc:
+            raise ProtocolError(f"ready description off its schema: {exc}") from None
+    if tag == b"K":
+        if body:
+            raise ProtocolError(f"reset acknowledgement with {len(body)} stray bytes")
+        return Reply(OK)
+    if tag == b"A":
+        if len(body) != _INT.size:
+            raise ProtocolError(f"integer action of {len(body)} bytes, want {_INT.size}")
+        return Reply(ACTION, _INT.unpack(body)[0])
+    if tag == b"V":
+        if not body or len(body) % 8 or len(body) // 8 > MAX_VECTOR:
+            raise ProtocolError(f"vector action of {len(body)} bytes, want 8 to {8 * MAX_VECTOR} in steps of 8")
+        values = tuple(float(x) for x in np.frombuffer(body, dtype="<f8"))
+        if not all(math.isfinite(x) for x in values):
+            raise ProtocolError("vector action with a NaN or infinite entry")
+        return Reply(ACTION, values)
+    raise ProtocolError(f"unknown reply tag {tag!r} ({len(frame)} bytes)")
+
+
+# ---------------------------------------------------------------------------------------------- frames
+
+
+def socket_from(obj: Any) -> socket.socket:
+    """A socket object for a socket or a file descriptor of one (the descriptor is owned by the result)."""
+    return obj if isinstance(obj, socket.socket) else socket.socket(fileno=int(obj))
+
+
+class AgentEnd:
+    """The agent process's end: blocking reads of pickled requests, writes of encoded replies."""
+
+    def __init__(self, sock: socket.socket):
+        self.sock = sock
+        self.sock.settimeout(None)
+
+    def receive(self) -> tuple:
+        """The next request; raises ``ChannelClosed`` when the env process closed the channel."""
+        (length,) = _HEADER.unpack(self._exactly(_HEADER.size))
+        return pickle.loads(self._exactly(length))
+
+    def reply(self, payload: bytes) -> None:
+        self.sock.sendall(_HEADER.pack(len(payload)) + payload)
+
+    def _exactly(self, n: int) -> bytes:
+        buf = bytearray(n)
+        view, got = memoryview(buf), 0
+        while got < n:
+            k = self.sock.recv_into(view[got:])
+            if k == 0:
+                raise ChannelClosed("the env process closed the channel")
+            got += k
+        return bytes(buf)
+
+    def close(self) -> None:
+        self.sock.close()
+
+
+class EnvEnd:
+    """The env process's end: every read and write has a deadline, during which ``on_wait`` is
+    called at least every ``wait_step_s`` (the env process's heartbeat).
+
+    Args:
+        sock: the connected socket.
+        on_wait: called while waiting for the agent.
+        wait_step_s: longest wait between two ``on_wait`` calls [s].
+    """
+
+    def __init__(self, sock: socket.socket, on_wait: Callable[[], None] = lambda: None, wait_step_s: float = 0.5):
+        self.sock = sock
+        self.on_wait = on_wait
+        self.wait_step_s = wait_step_s
+
+    def request(self, message: tuple, timeout_s: float) -> None:
+        """Send a pickled request; raises ``ChannelTimeout`` when the agent does not take it in
+        ``timeout_s`` [s], ``ChannelClosed`` when its end is gone, ``ProtocolError`` when the agent
+        sent something nobody asked for."""
+        self._no_unsolicited_data()
+        data = pickle.dumps(message, protocol=pickle.HIGHEST_PROTOCOL)
+        frame = memoryview(_HEADER.pack(len(data)) + data)
+        deadline = time.monotonic() + timeout_s
+        sent = 0
+        while sent < len(frame):
+            self.sock.settimeout(self._step(deadline))
+            try:
+                sent += self.sock.send(frame[sent:])
+            except TimeoutError:
+                self.on_wait()
+            except OSError as exc:
+                raise ChannelClosed(f"the agent's end is closed ({type(exc).__name__})") from None
+
+    def reply(self, timeout_s: float) -> Reply:
+        """The agent's next reply, decoded; raises ``ChannelTimeout``, ``ChannelClosed`` or
+        ``ProtocolError`` (oversized, malformed, or followed by more data)."""
+        deadline = time.monotonic() + timeout_s
+        (length,) = _HEADER.unpack(self._exactly(_HEADER.size, deadline))
+        if length > MAX_REPLY_BYTES:
+            raise ProtocolError(f"reply of {length} bytes announced, the limit is {MAX_REPLY_BYTES}")
+        reply = decode_reply(self._exactly(length, deadline))
+        self._no_unsolicited_data()
+        return reply
+
+    def close(self) -> None:
+        self.sock.close()
+
+    def _step(self, deadline: float) -> float:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise ChannelTimeout("deadline passed")
+        return min(self.wait_step_s, left)
+
+    def _exactly(self, n: int, deadline: float) -> bytes:
+        buf = bytearray(n)
+        view, got = memoryview(buf), 0
+        while got < n:
+            self.sock.settimeout(self._step(deadline))
+            try:
+                k = self.sock.recv_into(view[got:])
+            except TimeoutError:
+                self.on_wait()
+                continue
+            except OSError as exc:
+                raise ChannelClosed(f"the agent's end is closed ({type(exc).__name__})") from None
+            if k == 0:
+                raise ChannelClosed("the agent closed its channel" + (f" {got} bytes into a frame" if got else ""))
+            got += k
+        return bytes(buf)
+
+    def _no_unsolicited_data(self) -> None:
+        """Raise ``ProtocolError`` when the agent has sent bytes no request asked for."""
+        self.sock.settimeout(0.0)
+        try:
+            pending = self.sock.recv(1, socket.MSG_PEEK)
+        except (BlockingIOError, InterruptedError):
+            return
+        except OSError:
+            return  # a broken end shows on the next read or write
+        if pending:
+            raise ProtocolError("the agent sent data nobody asked for (more than one reply to a request)")
