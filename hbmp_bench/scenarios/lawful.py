@@ -13,11 +13,13 @@ re-acceleration, ``v / (2 accel)`` [s] for cruise speed ``v`` [m/s]; the start f
 loses the same. A yellow always stops the model driver (conservative: a lawful driver may go on a
 yellow it cannot stop for). Lanes inside junctions have their own (turn) speed limits.
 
-Why not the worst case at every signal: with a red of ``cycle - green`` at each of a route's
-signals, the shortest routes of the small towns leave less time per signal than the clearance
-intervals alone (Town02: 8.7 s per signal on Navigation episode 7, 6 signals in 255 m; yellow and
-all-red take 10.8 s of every red). Lights that start together bound the total red time instead: a
-driver released by one light meets the next lights at a known point of their cycle.
+Why not the worst case, a full red at every signal: at 0.8 of the limit, the CoRL2017 timeouts of
+the small towns leave less time per signal than the clearance intervals alone (Town02: 10.2 s per
+signal on corl2017 Navigation episode 7, 6 signals in 255 m, timeout 101.9 s, while yellows and
+all-reds take 10.8 s of every red; Town01: 17.2 s). Nor does a departure at any moment of the cycle
+fit Town02 (a red at the first light, then the lights of a zig-zag route out of step). What bounds
+a route's red time is that its lights start together with the episode: a driver released by one
+light meets the next ones at a known point of their cycle.
 """
 
 from __future__ import annotations
@@ -92,10 +94,11 @@ def route_signals(episode: Episode) -> tuple[RouteSignal, ...]:
     return _signals(net, episode, _path(net, episode))
 
 
-def lawful_travel_time(episode: Episode, fraction: float, accel: float = LAWFUL_ACCEL) -> float:
+def lawful_travel_time(episode: Episode, fraction: float, accel: float = LAWFUL_ACCEL,
+                       depart_s: float = 0.0) -> float:
     """Time [s] from the episode start until the model driver reaches the goal (module docstring),
-    cruising at ``fraction`` (0 < fraction <= 1) of each lane's speed limit and accelerating at
-    ``accel`` [m/s²]."""
+    cruising at ``fraction`` (0 < fraction <= 1) of each lane's speed limit, accelerating at
+    ``accel`` [m/s²] and setting off ``depart_s`` [s] after the episode start."""
     if not 0.0 < fraction <= 1.0:
         raise ValueError(f"fraction must be in (0, 1], got {fraction!r}")
     if not accel > 0.0:
@@ -116,7 +119,7 @@ def lawful_travel_time(episode: Episode, fraction: float, accel: float = LAWFUL_
         return t
 
     start_lane = next(k for k in range(len(path.lanes)) if path.offsets[k + 1] > start)
-    t = speeds[start_lane] / (2.0 * accel)
+    t = depart_s + speeds[start_lane] / (2.0 * accel)
     at = start
     for signal in _signals(net, episode, path):
         t += drive(at, signal.at_m)

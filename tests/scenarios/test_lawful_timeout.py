@@ -17,6 +17,8 @@ from hbmp_bench.sim.sumo import EGO_TYPE
 
 FRACTIONS = np.round(np.arange(0.6, 1.0 + 1e-9, 0.02), 2)
 """Cruise speeds of the lawful drivers, as fractions of each lane's limit."""
+DEPARTURES_S = (0.0, 1.0, 2.0)
+"""When the lawful drivers set off after the episode start [s] (a slow start)."""
 POSE_TASKS = ("Straight", "OneTurn", "Navigation")
 """Navigation dynamic drives Navigation's routes with Navigation's timeouts."""
 
@@ -31,10 +33,22 @@ def test_lawful_driver_meets_every_timeout(suite, town):
     late = []
     for task in (t for t in POSE_TASKS if t in get_suite(suite).tasks):
         for ep in suite_episodes(suite, town, task):
-            worst = max(lawful_travel_time(ep, f) for f in FRACTIONS)
+            worst = max(lawful_travel_time(ep, f, depart_s=d) for f in FRACTIONS for d in DEPARTURES_S)
             if worst > ep.timeout_s:
                 late.append((ep.key, round(worst, 1), ep.timeout_s))
     assert not late, late
+
+
+def test_one_signal_costs_at_most_its_longest_red():
+    """On a route with one signal, the departure that meets the start of its red loses the whole red
+    and the re-acceleration; one that meets its green loses nothing."""
+    ep = next(e for e in suite_episodes("corl2017", "Town01", "Straight") if len(route_signals(e)) == 1)
+    (signal,) = route_signals(ep)
+    program = read_programs(net_path("Town01"))[signal.link.tls]
+    f = 0.8
+    spent = [lawful_travel_time(ep, f, depart_s=d) - d for d in np.arange(0.0, program.cycle, 0.1)]
+    lost = program.longest_red(signal.link.link_index) + f * signal.speed / (2 * LAWFUL_ACCEL)
+    assert max(spent) - min(spent) == pytest.approx(lost, abs=0.11)
 
 
 def test_travel_time_model():
