@@ -178,13 +178,17 @@ def _fmt_time(t: float) -> str:
 def retime_yellows(path: str | Path) -> None:
     """Set every yellow phase of the net at ``path`` to :func:`yellow_time` of its junction's fastest
     approach, in place. Only the ``duration`` attributes of those phases change; the rest of the file
-    is left byte for byte as netconvert wrote it."""
+    is left byte for byte as netconvert wrote it. A light that controls no vehicle link keeps its
+    program. RuntimeError if a yellow phase is left with another duration (a phase written in a form
+    this does not read)."""
     path = Path(path)
     programs = read_programs(path)
     text = path.read_text(encoding="utf-8")
 
     def logic(m: re.Match) -> str:
         program = programs[m.group("id")]
+        if not program.vehicle_links:
+            return m.group(0)
         yellow = _fmt_time(yellow_time(program.approach_speed))
 
         def phase(p: re.Match) -> str:
@@ -195,6 +199,12 @@ def retime_yellows(path: str | Path) -> None:
         return m.group(1) + _PHASE.sub(phase, m.group("body")) + m.group(4)
 
     path.write_text(_TL_LOGIC.sub(logic, text), encoding="utf-8")
+    for program in read_programs(path).values():
+        if program.vehicle_links:
+            want = yellow_time(program.approach_speed)
+            wrong = [program.durations[i] for i in program.yellow_phases() if abs(program.durations[i] - want) > 1e-6]
+            if wrong:
+                raise RuntimeError(f"{path.name}: yellow phases of {program.id!r} not re-timed to {want} s: {wrong}")
 
 
 def _span(values: list[float]) -> list[float]:

@@ -192,3 +192,13 @@ def test_retime_yellows_on_a_netconvert_default_program(tmp_path):
     retime_yellows(copy)
     assert copy.read_text(encoding="utf-8") == after  # idempotent
     ET.parse(path)  # still well-formed
+
+
+def test_retime_yellows_refuses_a_phase_it_cannot_read(tmp_path):
+    path = _cross_net(tmp_path)
+    text = path.read_text(encoding="utf-8")
+    odd = re.sub(r'(<phase duration="[^"]+")(\s+state="y)', r'\1 name="amber"\2', text, count=1)
+    assert odd != text
+    path.write_text(odd, encoding="utf-8")
+    with pytest.raises(RuntimeError, match="not re-timed"):
+        retime_yellows(path)
