@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import math
 
+import libsumo
 import numpy as np
 import pytest
+import sumo
 
 from hbmp_bench.maps import TOWNS, net_path
 from hbmp_bench.maps.signals import queue_cleared, read_programs
@@ -36,6 +38,47 @@ def test_lawful_driver_meets_every_timeout(suite, town):
             worst = max(lawful_travel_time(ep, f, depart_s=d) for f in FRACTIONS for d in DEPARTURES_S)
             if worst > ep.timeout_s:
                 late.append((ep.key, round(worst, 1), ep.timeout_s))
+    assert not late, late
+
+
+def _sumo_arrival_s(ep, speed_factor: float) -> float:
+    """Simulation time [s] at which SUMO's own driver (Krauss without dawdling, the ego's length and
+    acceleration), sent along the episode's route from a standstill at its start, arrives at its goal
+    through the town's lights (inf if not within the timeout + 60 s)."""
+    libsumo.start([str(sumo.SUMO_HOME) + "/bin/sumo", "-n", str(net_path(ep.town)), "--step-length", "0.1",
+                   "--no-step-log", "true", "--no-warnings", "true", "--default.speeddev", "0"])
+    try:
+        libsumo.vehicletype.copy("DEFAULT_VEHTYPE", "lawful")
+        libsumo.vehicletype.setAccel("lawful", EGO_TYPE.accel)
+        libsumo.vehicletype.setDecel("lawful", EGO_TYPE.decel)
+        libsumo.vehicletype.setLength("lawful", EGO_TYPE.length)
+        libsumo.vehicletype.setImperfection("lawful", 0.0)
+        libsumo.vehicletype.setSpeedFactor("lawful", speed_factor)
+        libsumo.route.add("route", list(ep.route))
+        lane = road_network(ep.town).lane(ep.start_lane)
+        libsumo.vehicle.add("lawful", "route", typeID="lawful", departLane=str(lane.index), departPos=str(ep.start_pos),
+                            departSpeed="0", arrivalPos=str(ep.goal_pos))
+        while libsumo.simulation.getTime() < ep.timeout_s + 60.0:
+            libsumo.simulationStep()
+            if "lawful" in libsumo.simulation.getArrivedIDList():
+                return libsumo.simulation.getTime()
+        return math.inf
+    finally:
+        libsumo.close()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("suite", "town"), [("corl2017", t) for t in TOWNS] + [("hbmp", "Town02"), ("hbmp", "Town03")])
+def test_sumo_driver_meets_every_timeout(suite, town):
+    """A second lawful driver with other dynamics: SUMO's own, which brakes for a yellow it can stop for,
+    slows for turns and changes lanes itself, at 80 % and 100 % of the limits."""
+    late = []
+    for task in POSE_TASKS:
+        for ep in suite_episodes(suite, town, task):
+            for factor in (0.8, 1.0):
+                arrival = _sumo_arrival_s(ep, factor)
+                if arrival > ep.timeout_s:
+                    late.append((ep.key, factor, arrival, ep.timeout_s))
     assert not late, late
 
 
