@@ -73,6 +73,13 @@ class ContinuousConfig:
 class EventDriver:
     """SUMO drives the behavior: v_ref through ``setSpeed``, lane changes through ``changeLane``.
 
+    ``setSpeed`` holds v_ref until the next decision and SUMO moves towards it within the ego
+    type's acceleration / deceleration (2.6 / 4.5 m/s², :data:`~hbmp_bench.sim.sumo.EGO_TYPE`;
+    the speed mode of :meth:`~hbmp_bench.sim.sumo.SumoSim.hand_over` keeps those limits), so with
+    0.1 s decisions one speed step spans several decisions and a chain of speed_down brakes at
+    4.5 m/s² (21 m from 50 km/h); with 1 s decisions the speed_down step of
+    :class:`~hbmp_bench.planning.BehaviorConfig` keeps it braking the whole decision (23 m).
+
     Args:
         sim / net: the simulation and its road network.
         vehicle_id: the SUMO vehicle (already handed over, see :meth:`SumoSim.hand_over`).

@@ -3,7 +3,9 @@
 Plain XML files written per town: ``<Town>.nod.xml`` (nodes) and ``<Town>.edg.xml``
 (edges and roundabouts). netconvert (from the eclipse-sumo wheel) turns them into
 ``<Town>.net.xml`` with right-hand traffic, 3.5 m lanes, sidewalks, guessed pedestrian
-crossings, internal junction lanes and no U-turns.
+crossings, internal junction lanes and no U-turns. Traffic lights get netconvert's fixed-time
+programs with the package's greens and all-red clearances; the yellows are then set per junction
+from its approach speed (:mod:`hbmp_bench.maps.signals`).
 """
 
 from __future__ import annotations
@@ -16,10 +18,12 @@ from pathlib import Path
 
 from ..errors import UnknownNameError
 from .netconvert import run_netconvert
+from .signals import ALL_RED_TIME_S, CROSSING_CLEARANCE_S, retime_yellows
 from .spec import SIDEWALK_WIDTH, Road, TownSpec, rounded_polyline
 from .towns import TOWNS, town_spec
 
-#: netconvert options shared by every generated town (see the SUMO netconvert docs).
+#: netconvert options shared by every generated town (see the SUMO netconvert docs); the
+#: green of the lights' main phases is the town's (``--tls.green.time``, :attr:`TownSpec.green_s`).
 NETCONVERT_OPTIONS: tuple[str, ...] = (
     "--default.lanewidth", "3.5",          # m
     "--default.sidewalk-width", str(SIDEWALK_WIDTH),  # m
@@ -30,7 +34,9 @@ NETCONVERT_OPTIONS: tuple[str, ...] = (
     "--geometry.remove", "false",
     "--roundabouts.guess", "false",    # roundabouts are declared in the spec
     "--tls.guess", "false",
-    "--tls.cycle.time", "30",          # s; short CARLA-like light cycles (netconvert default: 90)
+    "--tls.allred.time", str(ALL_RED_TIME_S),      # s, after every yellow
+    "--tls.left-green.time", "0",                  # no protected left phases: lefts yield
+    "--tls.crossing-clearance.time", str(CROSSING_CLEARANCE_S),  # s
     "--offset.disable-normalization", "true",
     "--output.street-names", "false",
     "--xml-validation", "never",
@@ -137,9 +143,10 @@ def build_spec(spec: TownSpec, out_dir: Path, keep_plain: bool = False) -> Path:
         tmp_dir = Path(tmp)
         nod, edg = write_plain_xml(spec, tmp_dir)
         net_name = f"{spec.name}.net.xml"
-        run_netconvert(["--node-files", nod.name, "--edge-files", edg.name,
-                        *NETCONVERT_OPTIONS, "--output-file", net_name], cwd=tmp_dir)
+        run_netconvert(["--node-files", nod.name, "--edge-files", edg.name, *NETCONVERT_OPTIONS,
+                        "--tls.green.time", str(spec.green_s), "--output-file", net_name], cwd=tmp_dir)
         _strip_header(tmp_dir / net_name)
+        retime_yellows(tmp_dir / net_name)
         if keep_plain:
             for p in (nod, edg):
                 shutil.copy2(p, out_dir / p.name)

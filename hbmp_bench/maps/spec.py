@@ -82,12 +82,25 @@ class Roundabout:
 
 @dataclass(frozen=True)
 class TownSpec:
-    """Everything the builder needs to make one town's net."""
+    """Everything the builder needs to make one town's net.
+
+    Attributes:
+        name: town name (the net is ``<name>.net.xml``).
+        nodes / roads / roundabouts: the layout.
+        green_s: vehicle green of each main phase of the town's traffic lights [s]
+            (:mod:`hbmp_bench.maps.signals`: long enough to clear the suites' queues, short
+            enough that a lawful driver meets every episode's timeout).
+    """
 
     name: str
     nodes: tuple[Node, ...]
     roads: tuple[Road, ...]
     roundabouts: tuple[Roundabout, ...] = field(default=())
+    green_s: int = 20
+
+    def __post_init__(self):
+        if self.green_s < 5:
+            raise ValueError(f"{self.name}: green_s must be >= 5 [s], got {self.green_s}")
 
     def node(self, node_id: str) -> Node:
         """The node with id ``node_id`` (KeyError if none)."""

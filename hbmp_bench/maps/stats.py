@@ -10,6 +10,10 @@ Definitions (units: m):
   ``right_before_left``, ``left_before_right``, ``allway_stop`` and ``zipper`` nodes are
   priority junctions; dead ends, internal and other nodes are no junctions.
 * extent: width and height of the net's ``convBoundary``, m.
+* signal timing (s): ``tls_yellow_s``, ``tls_all_red_s`` (phase durations), ``tls_green_s`` (a
+  vehicle link's green per cycle), ``tls_red_s`` (a vehicle link's longest red) and
+  ``tls_cycle_s``, each [min, max] over the net's lights
+  (:func:`hbmp_bench.maps.signals.signal_stats`).
 """
 
 from __future__ import annotations
@@ -17,6 +21,8 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from collections import Counter
 from pathlib import Path
+
+from .signals import signal_stats
 
 TLS_TYPES = frozenset({"traffic_light", "traffic_light_unregulated",
                        "traffic_light_right_on_red"})
@@ -47,7 +53,8 @@ def net_stats(path: str | Path) -> dict:
     Returns a dict with ``directed_road_length_m`` (float, m), ``drivable_edges``,
     ``lanes_per_edge`` ({lane count as str: number of drivable edges}),
     ``tls_junctions``, ``priority_junctions``, ``roundabouts``, ``extent_m``
-    ([width, height], m), ``has_sidewalks`` (bool) and ``crossings`` (int).
+    ([width, height], m), ``has_sidewalks`` (bool), ``crossings`` (int) and the signal
+    timing ``tls_*_s`` ([min, max], s).
     """
     root = ET.parse(path).getroot()
     length = 0.0
@@ -86,4 +93,5 @@ def net_stats(path: str | Path) -> dict:
         "extent_m": extent,
         "has_sidewalks": sidewalks,
         "crossings": crossings,
+        **{f"tls_{key}": value for key, value in signal_stats(path).items()},
     }

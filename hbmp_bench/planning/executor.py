@@ -22,7 +22,11 @@
   incoming ego state has ``|e| < e_thresh`` and ``|theta_e| < theta_thresh`` on the
   target lane and, for speed_up / speed_down, ``|v - v_ref| < v_thresh`` (``v_ref`` capped
   for curves by the latest plan, see :func:`.planner.curve_speed_cap`); or
-  ``max_duration`` [s] has elapsed (reason ``"timeout"``).
+  ``max_duration`` [s] has elapsed (reason ``"timeout"``). A behavior that keeps the ego
+  standing (``v_ref`` and the speed both below ``standstill_speed``, e.g. keep or
+  speed_down at a red light) skips the lane condition: a car at rest cannot reduce ``e`` or
+  ``theta_e``, and without this it would wait ``max_duration`` before the next decision
+  (not in the paper; it keeps a waiting car's decisions at ~1 s).
 * ``c~_total`` of the executed trajectory = the MEAN of the chosen sample's ``c_total``
   over the replans whose control was executed (the final, finishing step is not counted).
 """
@@ -83,6 +87,8 @@ class ExecutorConfig:
         v_thresh: speed-error threshold of speed_up / speed_down [m/s].
         min_duration: a behavior lasts at least this long [s] (decisions ~1 Hz).
         max_duration: a behavior is stopped after this long [s].
+        standstill_speed: below this speed [m/s] the ego stands; a behavior whose ``v_ref``
+            is also below it needs no lane convergence to finish (0 disables this).
         reward_scale: ``scale`` of :func:`reward_from_cost` used by :meth:`BehaviorExecutor.reward`.
     """
 
@@ -93,6 +99,7 @@ class ExecutorConfig:
     v_thresh: float = 0.5
     min_duration: float = 1.0
     max_duration: float = 8.0
+    standstill_speed: float = 0.05
     reward_scale: float = 1.0
 
     def __post_init__(self):
@@ -100,6 +107,8 @@ class ExecutorConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"ExecutorConfig.{name} must be finite and > 0, got {v!r}")
+        if not (math.isfinite(self.standstill_speed) and 0 <= self.standstill_speed < self.v_thresh):
+            raise ValueError("ExecutorConfig.standstill_speed must be in [0, v_thresh) [m/s]")
         if not (math.isfinite(self.min_duration) and 0 <= self.min_duration <= self.max_duration):
             raise ValueError("ExecutorConfig.min_duration must be in [0, max_duration]")
         r = self.replan_every
@@ -188,10 +197,12 @@ class BehaviorExecutor:
         c = self.cfg
         eps = 1e-9
         conv = abs(e) < c.e_thresh and abs(th) < c.theta_thresh
+        # the planner may cap v_ref for a curve ahead: converge to the speed it can hold
+        v_target = self.v_ref if self._plan is None else min(self.v_ref, self._plan.v_ref)
         if self.behavior in (Behavior.SPEED_UP, Behavior.SPEED_DOWN):
-            # the planner may cap v_ref for a curve ahead: converge to the speed it can hold
-            v_target = self.v_ref if self._plan is None else min(self.v_ref, self._plan.v_ref)
             conv = conv and abs(ego.v - v_target) < c.v_thresh
+        if v_target < c.standstill_speed and abs(ego.v) < c.standstill_speed:
+            conv = True  # standing, and asked to stand: the lane errors cannot change
         if conv and self.elapsed >= c.min_duration - eps:
             return "converged"
         if self.elapsed >= c.max_duration - eps:

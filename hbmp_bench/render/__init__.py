@@ -5,8 +5,11 @@
 * :func:`write_gif`, :func:`write_video`, :func:`record_episode` -- frames to an animated GIF
   (MP4 with imageio-ffmpeg); one recorded episode.
 * :func:`planner_figure` -- the motion planner's samples and costs per behavior (PNG).
+* :func:`~.stopping_figure.stopping_figure` -- speed over distance of a speed_down chain that
+  stops the ego from the speed limit, both fidelities (runs SUMO).
 
-Commands: ``hbmp-bench record`` and ``hbmp-bench plot-planner`` (:mod:`.commands`).
+Commands: ``hbmp-bench record``, ``hbmp-bench plot-planner`` and ``hbmp-bench plot-stopping``
+(:mod:`.commands`).
 """
 
 from hbmp_bench.render.planner_figure import planner_figure

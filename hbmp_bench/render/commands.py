@@ -1,4 +1,5 @@
-"""``hbmp-bench record`` (an episode as a GIF) and ``hbmp-bench plot-planner`` (the planner figure)."""
+"""``hbmp-bench record`` (an episode as a GIF), ``hbmp-bench plot-planner`` (the planner figure) and
+``hbmp-bench plot-stopping`` (the stopping-distance figure)."""
 
 from __future__ import annotations
 
@@ -40,8 +41,23 @@ def _cmd_plot_planner(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_plot_stopping(args: argparse.Namespace) -> int:
+    from hbmp_bench.render.stopping_figure import stopping_figure
+
+    rows = stopping_figure(args.out, town=args.town)
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print(f"wrote {args.out}")
+    print(f"  {'curve':62s} {'v0 [m/s]':>8s} {'stop [m]':>8s} {'+latency [m]':>12s} {'bound [m]':>9s}")
+    for r in rows:
+        print(f"  {r['label']:62s} {r['v_start_mps']:8.2f} {r['distance_m']:8.1f} "
+              f"{r['distance_with_latency_m']:12.1f} {r['bound_m']:9.1f}")
+    return 0
+
+
 def add_commands(subparsers) -> None:
-    """Add ``record`` and ``plot-planner`` to the ``hbmp-bench`` sub-commands."""
+    """Add ``record``, ``plot-planner`` and ``plot-stopping`` to the ``hbmp-bench`` sub-commands."""
     p = subparsers.add_parser("record", help="run an agent on one episode and write a top-down GIF")
     p.add_argument("--env", required=True, help="env id, e.g. hbmp_bench/Town01-Straight-v0")
     p.add_argument("--agent", default="expert", help="registry name or module:Class")
@@ -62,3 +78,11 @@ def add_commands(subparsers) -> None:
     p.add_argument("--out", required=True, help="output .png (.pdf, .svg)")
     p.add_argument("--json", action="store_true", help="print the costs as JSON")
     p.set_defaults(func=_cmd_plot_planner)
+
+    p = subparsers.add_parser("plot-stopping",
+                              help="figure of speed over distance while speed_down decisions stop the ego from the "
+                                   "speed limit, in both fidelities")
+    p.add_argument("--town", default="Town01", help="map; its longest Straight episode is driven")
+    p.add_argument("--out", required=True, help="output .png (.pdf, .svg)")
+    p.add_argument("--json", action="store_true", help="print the measured stops as JSON")
+    p.set_defaults(func=_cmd_plot_stopping)

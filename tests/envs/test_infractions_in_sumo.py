@@ -198,11 +198,18 @@ def test_opposite_lane_across_three_junctions_is_one_wrong_lane_event(world):
 
 def test_expert_stops_at_red_lights_and_drives_a_clean_episode():
     """The expert through three signalised junctions on SUMO's own light programs: it waits at a red
-    light at least once, reaches the goal and no detector fires."""
+    light at least once, reaches the goal and no detector fires. The first light starts in the phase
+    that serves the cross street (its program runs on from there), so the ego meets a red whatever
+    the towns' green times."""
     env = BehaviorEnv(town="Town01", task="Straight", episode_index=0)
     agent = load_agent("expert")
     obs, info = env.reset(seed=0)
-    assert env.world.episode == _three_light_episode(env.world.net)
+    ep = env.world.episode
+    assert ep == _three_light_episode(env.world.net)
+    first = env.world.net.links(ep.route[0], ep.route[1])[0]
+    (logic,) = libsumo.trafficlight.getAllProgramLogics(first.tls)
+    cross = next(k for k, ph in enumerate(logic.phases) if ph.state[first.link_index] == "r" and "G" in ph.state)
+    libsumo.trafficlight.setPhase(first.tls, cross)
     agent.reset(info)
     waited_at_red = 0
     for _ in range(400):

@@ -1,4 +1,4 @@
-"""Regenerating every town with the generator gives the shipped net."""
+"""Regenerating every town with the generator gives the shipped net (its signal programs included)."""
 
 from __future__ import annotations
 
@@ -18,18 +18,21 @@ def _summary(path):
         edges[e.get("id")] = (e.get("function", "normal"), len(lanes))
         lengths[e.get("id")] = [float(ln.get("length")) for ln in lanes]
     junctions = {j.get("id"): j.get("type") for j in root.iter("junction")}
-    conns = {(c.get("from"), c.get("to"), c.get("fromLane"), c.get("toLane"), c.get("via"))
-             for c in root.iter("connection")}
-    return edges, lengths, junctions, conns
+    conns = {(c.get("from"), c.get("to"), c.get("fromLane"), c.get("toLane"), c.get("via"), c.get("tl"),
+              c.get("linkIndex")) for c in root.iter("connection")}
+    programs = {t.get("id"): (t.get("offset"), [(float(p.get("duration")), p.get("state")) for p in t.iter("phase")])
+                for t in root.iter("tlLogic")}
+    return edges, lengths, junctions, conns, programs
 
 
 @pytest.mark.parametrize("town", TOWNS)
 def test_regenerated_net_equals_shipped(tmp_path, town):
     built = build_town(town, tmp_path)
     assert built == tmp_path / f"{town}.net.xml"
-    e1, l1, j1, c1 = _summary(net_path(town))
-    e2, l2, j2, c2 = _summary(built)
+    e1, l1, j1, c1, p1 = _summary(net_path(town))
+    e2, l2, j2, c2, p2 = _summary(built)
     assert e1 == e2 and j1 == j2 and c1 == c2
+    assert p1 == p2
     for eid, lens in l1.items():
         assert lens == pytest.approx(l2[eid], abs=0.01), eid
 

@@ -78,8 +78,12 @@ def test_behavior_order_matches_paper():
     (Behavior.SPEED_UP, 5.0, 30.0, 7.0),        # min step 2 m/s
     (Behavior.SPEED_UP, 0.0, 30.0, 2.0),        # from standstill
     (Behavior.SPEED_UP, 13.0, 13.89, 13.89),    # capped to the limit
-    (Behavior.SPEED_DOWN, 15.0, 30.0, 12.0),
-    (Behavior.SPEED_DOWN, 1.0, 30.0, 0.0),      # not below 0
+    (Behavior.SPEED_DOWN, 20.0, 30.0, 13.0),    # -35 %
+    (Behavior.SPEED_DOWN, 13.89, 13.89, 9.0285),
+    (Behavior.SPEED_DOWN, 8.0, 30.0, 4.5),      # min step 3.5 m/s
+    (Behavior.SPEED_DOWN, 3.0, 30.0, 0.0),      # not below 0
+    (Behavior.SPEED_DOWN, 20.0, 13.89, 13.0),   # above the limit: -35 %, at most the limit
+    (Behavior.SPEED_DOWN, 30.0, 13.89, 13.89),
     (Behavior.CHANGE_LEFT, 9.0, 30.0, 9.0),
     (Behavior.CHANGE_RIGHT, 9.0, 30.0, 9.0),
     (Behavior.KEEP, 9.0, 30.0, 9.0),
@@ -91,13 +95,45 @@ def test_reference_speed(b, v, limit, expected):
 
 
 def test_reference_speed_config_and_validation():
-    cfg = BehaviorConfig(speed_change_frac=0.5, min_speed_step=0.0)
+    cfg = BehaviorConfig(speed_up_frac=0.5, speed_up_min_step=0.0)
     assert reference_speed(Behavior.SPEED_UP, 10.0, 30.0, cfg) == pytest.approx(15.0)
-    with pytest.raises(ValueError):
-        BehaviorConfig(speed_change_frac=0.0)
-    with pytest.raises(ValueError):
-        BehaviorConfig(min_speed_step=-1.0)
+    assert reference_speed(Behavior.SPEED_DOWN, 10.0, 30.0, cfg) == pytest.approx(6.5)  # speed_down unchanged
+    cfg = BehaviorConfig(speed_down_frac=0.2, speed_down_min_step=2.0)
+    assert reference_speed(Behavior.SPEED_DOWN, 15.0, 30.0, cfg) == pytest.approx(12.0)
+    assert reference_speed(Behavior.SPEED_DOWN, 9.0, 30.0, BehaviorConfig(speed_down_frac=1.0)) == 0.0
+    for bad in ({"speed_up_frac": 0.0}, {"speed_up_frac": 1.0}, {"speed_down_frac": 0.0},
+                {"speed_down_frac": 1.01}, {"speed_up_min_step": -1.0}, {"speed_down_min_step": -0.1},
+                {"speed_down_min_step": float("nan")}, {"speed_down_min_step": float("inf")},
+                {"min_lane_change_speed": -1.0}):
+        with pytest.raises(ValueError):
+            BehaviorConfig(**bad)
     with pytest.raises(ValueError):
         reference_speed(Behavior.KEEP, 1.0, 0.0)
     with pytest.raises(ValueError):
         reference_speed(7, 1.0, 10.0)
+
+
+def test_speed_step_sizes():
+    cfg = BehaviorConfig()
+    assert cfg.speed_step(Behavior.SPEED_UP, 15.0) == pytest.approx(3.0)       # 20 %
+    assert cfg.speed_step(Behavior.SPEED_UP, 0.0) == pytest.approx(2.0)        # min 2 m/s
+    assert cfg.speed_step(Behavior.SPEED_DOWN, 20.0) == pytest.approx(7.0)     # 35 %
+    assert cfg.speed_step(Behavior.SPEED_DOWN, 5.0) == pytest.approx(3.5)      # min 3.5 m/s
+    for b in (Behavior.KEEP, Behavior.CHANGE_LEFT, Behavior.CHANGE_RIGHT):
+        assert cfg.speed_step(b, 10.0) == 0.0
+
+
+def test_a_chain_of_speed_down_steps_stops_in_few_decisions():
+    """From 50 km/h each v_ref step is at least decel * 1 s of the planner's profile (3 m/s), so a
+    one-second behavior brakes all the time; v_ref reaches 0 within four decisions."""
+    cfg, v, refs = BehaviorConfig(), 13.89, []
+    while v > 0.0:
+        v = reference_speed(Behavior.SPEED_DOWN, v, 13.89, cfg)
+        refs.append(v)
+    assert refs == pytest.approx([9.0285, 5.5285, 2.0285, 0.0])
+    assert all(cfg.speed_step(Behavior.SPEED_DOWN, u) >= 3.0 for u in (13.89, *refs[:-1]))
+    v, ups = 0.0, []
+    while v < 13.89:  # speed_up keeps its finer 20 % / 2 m/s steps
+        v = reference_speed(Behavior.SPEED_UP, v, 13.89, cfg)
+        ups.append(v)
+    assert ups == pytest.approx([2.0, 4.0, 6.0, 8.0, 10.0, 12.0, 13.89])

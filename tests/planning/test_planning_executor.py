@@ -116,8 +116,8 @@ def test_speed_up_tracks_the_new_reference():
 def test_speed_down_and_speed_limit():
     ex = BehaviorExecutor()
     r = simulate_behavior(ex, Behavior.SPEED_DOWN, VehicleState(0.0, 0.0, 0.0, 12.0), STRAIGHT, 20.0)
-    assert r.outcome.v_ref == pytest.approx(9.6)
-    assert r.outcome.reason == "converged" and abs(r.final.v - 9.6) < 0.5
+    assert r.outcome.v_ref == pytest.approx(7.8)  # 12 - max(35 %, 3.5 m/s)
+    assert r.outcome.reason == "converged" and abs(r.final.v - 7.8) < 0.5
     r = simulate_behavior(ex, Behavior.SPEED_UP, VehicleState(0.0, 0.0, 0.0, 12.0), STRAIGHT, 13.0)
     assert r.outcome.v_ref == pytest.approx(13.0)
 
@@ -131,8 +131,9 @@ def test_keep_lasts_the_minimum_duration():
 
 
 def test_timeout_at_max_duration():
-    ex = BehaviorExecutor(config=ExecutorConfig(max_duration=3.0))
-    # standing still 2 m off the lane: keep (v_ref = 0) can never converge
+    ex = BehaviorExecutor(config=ExecutorConfig(max_duration=3.0, standstill_speed=0.0))
+    # standing still 2 m off the lane: keep (v_ref = 0) can never converge (with the
+    # standstill exemption disabled)
     r = simulate_behavior(ex, Behavior.KEEP, VehicleState(0.0, 2.0, 0.0, 0.0), STRAIGHT, 20.0)
     assert r.outcome.reason == "timeout" and r.outcome.duration == pytest.approx(3.0)
     assert r.final.v == 0.0
@@ -211,3 +212,51 @@ def test_change_left_passes_a_slow_car_without_collision():
     ex2 = BehaviorExecutor()
     r2 = simulate_behavior(ex2, Behavior.KEEP, ego, STRAIGHT, 20.0, obs)
     assert r2.outcome.c_total > r.outcome.c_total
+
+
+@pytest.mark.parametrize("v0", [8.0, 13.89, 25.0])
+def test_a_chain_of_speed_down_stops_within_the_lawful_distance(v0):
+    """keep for one decision (the latency: a need that arises just after it is acted on at the
+    next decision), then speed_down at every decision: the stop, latency included, fits in
+    v * 1 s + v^2 / (2 * 3 m/s^2) and never uses the full-brake sample (6 m/s^2)."""
+    ex = BehaviorExecutor()
+    ego = VehicleState(0.0, 0.0, 0.0, v0)
+    cruise = simulate_behavior(ex, Behavior.KEEP, ego, STRAIGHT, max(v0, 13.89))
+    assert cruise.outcome.duration == pytest.approx(1.0)
+    speeds, ego, decisions = list(cruise.states[:, 3]), cruise.final, 0
+    while ego.v > 0.0 and decisions < 20:
+        r = simulate_behavior(ex, Behavior.SPEED_DOWN, ego, STRAIGHT, max(v0, 13.89))
+        assert r.outcome.reason == "converged"
+        speeds += list(r.states[1:, 3])
+        ego, decisions = r.final, decisions + 1
+    assert ego.v == 0.0 and decisions <= 6
+    bound = v0 * 1.0 + v0 ** 2 / (2 * 3.0)
+    assert ego.x - cruise.states[0, 0] <= bound
+    decel = -np.diff(speeds) / ex.cfg.dt
+    assert decel.max() < 4.5
+
+
+@pytest.mark.parametrize("behavior", [Behavior.KEEP, Behavior.SPEED_DOWN])
+def test_a_standing_car_asked_to_stand_decides_again_after_the_minimum_duration(behavior):
+    """At rest off the lane centre, a behavior with v_ref = 0 cannot reduce e or theta_e; it ends
+    after min_duration (not max_duration), and the car has not moved."""
+    ex = BehaviorExecutor()
+    ego = VehicleState(0.0, 0.8, 0.15, 0.0)
+    r = simulate_behavior(ex, behavior, ego, STRAIGHT, 13.89)
+    assert r.outcome.v_ref == 0.0
+    assert r.outcome.reason == "converged" and r.outcome.duration == pytest.approx(1.0)
+    np.testing.assert_allclose(r.states[:, :4], np.tile([0.0, 0.8, 0.15, 0.0], (len(r.states), 1)), atol=1e-9)
+    e, th = errors(STRAIGHT.current, r.final)
+    assert abs(e) > 0.3 and abs(th) > 0.05  # it would never have met the lane condition
+
+
+def test_a_standing_car_asked_to_move_still_converges_to_the_lane():
+    ex = BehaviorExecutor()
+    r = simulate_behavior(ex, Behavior.SPEED_UP, VehicleState(0.0, 0.8, 0.15, 0.0), STRAIGHT, 13.89)
+    assert r.outcome.v_ref == pytest.approx(2.0)
+    e, th = errors(STRAIGHT.current, r.final)
+    assert r.outcome.reason == "converged" and abs(e) < 0.3 and abs(th) < 0.05 and r.outcome.duration > 1.0
+    with pytest.raises(ValueError, match="standstill_speed"):
+        ExecutorConfig(standstill_speed=0.5)
+    with pytest.raises(ValueError, match="standstill_speed"):
+        ExecutorConfig(standstill_speed=-0.1)

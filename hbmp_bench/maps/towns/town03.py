@@ -7,6 +7,11 @@ block holds a two-lane roundabout (centre (160, 165), radius 25) fed by four
 approaches. The south inner road (y = 95) is a 3-lane avenue, side streets have one
 lane, all other roads two lanes per direction. The junction at (230, 235) is
 signalised with five legs (a diagonal to the north-east corner). All roads 13.89 m/s.
+
+Lights: 12 s greens, not the 20 s of Town01/04/05. The five-leg junction needs three main phases
+and a pedestrian phase (a 62 s cycle with 12 s greens, 86 s with 20 s), and routes of ~100 m
+through it have ~47 s CoRL2017 timeouts: with 14 s greens a lawful driver misses some
+(:mod:`hbmp_bench.scenarios.lawful`).
 """
 
 from ..spec import Node, Road, Roundabout, TownSpec, arc_points
@@ -83,4 +88,5 @@ SPEC = TownSpec(
     + tuple(Road(a, b, lanes=2, oneway=True, radius=0.0,
                  corners=_scaled(arc_points(CENTER, RADIUS, s, e))) for a, b, s, e in _RING),
     roundabouts=(Roundabout(("RS", "RE", "RN", "RW")),),
+    green_s=12,
 )
