@@ -316,24 +316,13 @@ def reap_orphans(parent: int, keep: Iterable[int], rounds: int = 20) -> int:
     home = _stat_fields(parent)
     if len(home) < 4:
         return 0
-    found = 0
-    for _ in range(rounds):
-        strays = []
-        for pid in _live_pids():
-            fields = _stat_fields(pid)
-            if (len(fields) > 3 and fields[0] != "Z" and fields[1] == str(parent) and fields[3] != home[3]
-                    and pid not in keep):
-                strays.append(pid)
-        if not strays:
-            return found
-        found += len(strays)
-        for pid in strays:
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
-        time.sleep(0.01)
-    return found
+
+    def strays() -> list[int]:
+        return [pid for pid in _live_pids()
+                if (f := _stat_fields(pid)) and len(f) > 3 and f[0] != "Z" and f[1] == str(parent)
+                and f[3] != home[3] and pid not in keep]
+
+    return _kill_until_gone(strays, rounds)
 
 
 def session_members(sid: int) -> list[int]:
@@ -350,17 +339,26 @@ def kill_session(sid: int, rounds: int = 20) -> int:
     """SIGKILL the process group ``sid`` and every process of session ``sid`` (an agent process
     and whatever it forked, also into other groups), until none is left. Returns how many
     processes were found alive in the session."""
-    found = 0
-    for _ in range(rounds):
+    def members() -> list[int]:
         try:
             os.killpg(sid, signal.SIGKILL)
         except (ProcessLookupError, PermissionError):
             pass
-        members = [pid for pid in session_members(sid) if pid != os.getpid()]
-        if not members:
+        return [pid for pid in session_members(sid) if pid != os.getpid()]
+
+    return _kill_until_gone(members, rounds)
+
+
+def _kill_until_gone(find: Callable[[], list[int]], rounds: int) -> int:
+    """SIGKILL what ``find()`` lists until it lists nothing (at most ``rounds`` times); returns how
+    many processes were found alive in all."""
+    found = 0
+    for _ in range(rounds):
+        pids = find()
+        if not pids:
             return found
-        found += len(members)
-        for pid in members:
+        found += len(pids)
+        for pid in pids:
             try:
                 os.kill(pid, signal.SIGKILL)
             except (ProcessLookupError, PermissionError):
