@@ -7,17 +7,19 @@ episode flow so that every shell shares one implementation.
 from __future__ import annotations
 
 import dataclasses
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from hbmp_bench import __version__
 from hbmp_bench.envs.drivers import FIDELITIES, LANE_CHANGE_CUTOFF_M, ContinuousConfig, ContinuousDriver, EventDriver, feasible_behaviors
-from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, road_profile
+from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, followed_path, road_profile
+from hbmp_bench.envs.privileged import FOE_RANGE_M, LEADER_RANGE_M, path_actors
 from hbmp_bench.maps import net_path
 from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents, StopLine
-from hbmp_bench.metrics.geometry import LaneLocator
+from hbmp_bench.metrics.geometry import LaneLocator, stop_line_of
 from hbmp_bench.metrics.records import EpisodeRecord, driving_score
 from hbmp_bench.planning.behaviors import BehaviorConfig
 from hbmp_bench.scenarios import Episode, road_network
@@ -103,6 +105,8 @@ class DrivingWorld:
         self.net: RoadNetwork = road_network(town)
         self.locator = LaneLocator(self.net)
         self.observer = ObservationBuilder(self.net, config.observation)
+        self._scene_path = functools.lru_cache(maxsize=256)(
+            lambda lane, nxt: followed_path(self.net, lane, nxt, 10.0, LEADER_RANGE_M + 20.0))
         self.sim = SumoSim(net_path(town), step_length=config.step_length_s)
         if config.fidelity == "continuous":
             self.driver = ContinuousDriver(self.sim, self.net, EGO_ID, EGO_TYPE, config.continuous, config.behavior)
@@ -405,8 +409,8 @@ class DrivingWorld:
     def _observe(self, events: StepEvents) -> tuple[dict, dict]:
         ego, ep = self._ego, self.episode
         route_index = self._route_index()
-        light = None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance, self._light.state)
-        road, scene = road_profile(self.net, ego.lane, ego.lane_pos, self.route, route_index, ep.goal_lane, ego.speed, light,
+        lane, lane_pos, light = self._profile_lane(ego)
+        road, scene = road_profile(self.net, lane, lane_pos, self.route, route_index, ep.goal_lane, ego.speed, light,
                                    ep.goal_pos)
         actors = self._actors
         occupancy = self.observer.occupancy(
@@ -414,6 +418,7 @@ class DrivingWorld:
             actors.xy, actors.yaw, actors.length, actors.width,
         )
         scene["goal_distance_m"] = float(np.hypot(*(ego.xy - self.goal_xy)))
+        scene.update(self._privileged(ego, light if scene["light"] else None))
         info = {
             "action_mask": self.action_mask(),
             "events": {k: getattr(events, k) for k in EVENT_KINDS},
@@ -424,6 +429,60 @@ class DrivingWorld:
             "scene": scene,
         }
         return {"occupancy": occupancy, "road": road}, info
+
+    def _front(self, ego) -> np.ndarray:
+        """The ego's front bumper (2,) [m]."""
+        return ego.xy + EGO_TYPE.length / 2 * np.array([np.cos(ego.yaw), np.sin(ego.yaw)])
+
+    def _profile_lane(self, ego) -> tuple[str, float, tuple[str, int, float, str] | None]:
+        """The lane and front-bumper position R_t is read on, and the next light on the route as
+        (tls, link index, distance [m], state) or None.
+
+        SUMO's lane as a rule; but a pose pushed with ``moveToXY`` next to the end of a lane may be
+        matched onto a junction lane while the front bumper has not reached the stop line yet:
+        then the followed lane, and the signal of its link (the one the detectors judge)."""
+        light = None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance,
+                                                  self._light.state)
+        lane = self._followed_lane
+        if ego.lane in self.net.lanes or lane not in self.net.lanes:
+            return ego.lane, ego.lane_pos, light
+        followed = self.net.lane(lane)
+        ends, direction = stop_line_of(followed.shape, followed.width)
+        ahead = float((ends[0] - self._front(ego)) @ direction)
+        if ahead <= 0.0:
+            return ego.lane, ego.lane_pos, light
+        fixed = self.locator.stop_line(lane, next(iter(self._next_edges(1)), None))
+        if fixed is not None:
+            light = (fixed[2], fixed[3], ahead, self.sim.light_state(fixed[2], fixed[3]))
+        return lane, max(followed.length - ahead, 0.0), light
+
+    def _junction_exit_m(self, ego) -> float:
+        """Distance from the front bumper to the end of the junction the route crosses next, or is
+        crossing, along the route's lanes [m] (inf after the last one)."""
+        k = self._route_pos.get(self.net.lane(self._followed_lane).edge) if self._followed_lane else None
+        if k is None or k + 1 >= len(self.route):
+            return float("inf")
+        path = self._route_path
+        on_edge = ego.lane in self.net.lanes and self.net.lanes[ego.lane].edge == self.route[k]
+        at = path.position(k, ego.lane_pos) if on_edge else path.junction_position(k, self._front(ego))
+        return max(float(path.edge_start[k + 1]) - at, 0.0)
+
+    def _privileged(self, ego, light: tuple[str, int, float, str] | None) -> dict:
+        """The privileged fields of ``info["scene"]`` (see :mod:`hbmp_bench.envs.privileged`)."""
+        k = self._route_index()
+        actors = self._actors
+        path = self._scene_path(self._followed_lane or ego.lane, self.route[k + 1: k + 4])
+        out = path_actors(path, ego.xy, EGO_TYPE.length, EGO_TYPE.width, actors.xy, actors.yaw, actors.speed,
+                          actors.length, actors.width, actors.is_pedestrian)
+        out["light_schedule"] = () if light is None else self.sim.signal_schedule(light[0], light[1])
+        out["junction_exit_m"] = self._junction_exit_m(ego)
+        out["junction_foes"] = tuple(
+            {"ego_dist_m": f.ego_dist, "ego_exit_m": f.ego_exit_dist, "foe_dist_m": f.foe_dist,
+             "foe_exit_m": f.foe_exit_dist, "foe_speed_mps": f.foe_speed, "ego_yields": f.ego_yields,
+             "foe_yields": f.foe_yields, "foe_signal": f.foe_signal}
+            for f in self.sim.junction_foes(EGO_ID, FOE_RANGE_M))
+        out["fidelity"] = self.config.fidelity
+        return out
 
     def scene_view(self, caption: str = ""):
         """What a top-down picture of this instant needs (:class:`hbmp_bench.render.SceneView`)."""

@@ -107,6 +107,34 @@ class VehicleState:
 
 
 @dataclass(frozen=True)
+class JunctionFoe:
+    """A vehicle whose link through a junction ahead crosses or merges with the ego's (SUMO's foe
+    links, ``vehicle.getJunctionFoes``). Distances are along each vehicle's own lanes to the
+    conflict area (the crossing or merging point) [m]; SUMO measures them from the front bumper.
+
+    Attributes:
+        id: the foe vehicle.
+        ego_dist / ego_exit_dist: ego's distance to the start / end of the conflict area [m].
+        foe_dist / foe_exit_dist: the foe's distance to the start / end of the conflict area [m].
+        foe_speed: the foe's speed [m/s].
+        ego_yields / foe_yields: the right of way of the two links (SUMO's junction logic): the
+            ego must yield to the foe / the foe must yield to the ego (traffic lights left aside).
+        foe_signal: the signal char of the foe's link when a traffic light controls it and the foe
+            has not passed it yet (``r``, ``y``, ``G`` ...), else "".
+    """
+
+    id: str
+    ego_dist: float
+    ego_exit_dist: float
+    foe_dist: float
+    foe_exit_dist: float
+    foe_speed: float
+    ego_yields: bool
+    foe_yields: bool
+    foe_signal: str
+
+
+@dataclass(frozen=True)
 class LightAhead:
     """The next traffic light on a vehicle's route: its state char and distance to the stop line [m]."""
 
@@ -149,6 +177,7 @@ class SumoSim:
         self._dims: dict[str, tuple[float, float, bool]] = {}
         self._routes = 0
         self._controlled: dict[str, list[str]] | None = None
+        self._programs: dict[str, tuple[tuple[float, str], ...]] = {}
         self._snapshot_dims: tuple | None = None
 
     # --------------------------------------------------------------- lifecycle
@@ -181,6 +210,7 @@ class SumoSim:
         )
         SumoSim._active = self
         self._controlled = None
+        self._programs = {}
         self._dims = {}
         self._snapshot_dims = None
         self._routes = 0
@@ -325,6 +355,42 @@ class SumoSim:
     def light_state(self, tls: str, link_index: int) -> str:
         """Current signal char (``r``, ``y``, ``g``, ``G`` ...) of one link of a traffic light."""
         return libsumo.trafficlight.getRedYellowGreenState(tls)[link_index]
+
+    def signal_schedule(self, tls: str, link_index: int, horizon_s: float = 60.0) -> tuple[tuple[float, str], ...]:
+        """The signal of one link now and at each change within ``horizon_s`` [s]: ((0, char now),
+        (seconds until the next change, new char), ...), read off the traffic light's program
+        (fixed-time programs; for others the current phase's planned end and the nominal
+        durations after it)."""
+        phases = self._programs.get(tls)
+        if phases is None:
+            program = libsumo.trafficlight.getProgram(tls)
+            logic = next(lg for lg in libsumo.trafficlight.getAllProgramLogics(tls) if lg.programID == program)
+            phases = self._programs[tls] = tuple((float(p.duration), p.state) for p in logic.phases)
+        phase = libsumo.trafficlight.getPhase(tls)
+        now = libsumo.simulation.getTime()
+        char = libsumo.trafficlight.getRedYellowGreenState(tls)[link_index]
+        out = [(0.0, char)]
+        t = max(libsumo.trafficlight.getNextSwitch(tls) - now, 0.0)
+        for k in range(1, 4 * len(phases) + 1):
+            if t > horizon_s:
+                break
+            duration, state = phases[(phase + k) % len(phases)]
+            if state[link_index] != out[-1][1]:
+                out.append((round(t, 3), state[link_index]))
+            t += duration
+        return tuple(out)
+
+    def junction_foes(self, vehicle_id: str, distance_m: float) -> tuple[JunctionFoe, ...]:
+        """The vehicles on foe links of the junctions within ``distance_m`` [m] ahead of a vehicle
+        on its route (see :class:`JunctionFoe`)."""
+        out = []
+        for foe, ego_dist, foe_dist, ego_exit, foe_exit, _, _, ego_yields, foe_yields in \
+                libsumo.vehicle.getJunctionFoes(vehicle_id, float(distance_m)):
+            lights = libsumo.vehicle.getNextTLS(foe)
+            signal = lights[0][3] if lights and lights[0][2] <= foe_dist + 1.0 else ""
+            out.append(JunctionFoe(foe, float(ego_dist), float(ego_exit), float(foe_dist), float(foe_exit),
+                                   float(libsumo.vehicle.getSpeed(foe)), bool(ego_yields), bool(foe_yields), signal))
+        return tuple(out)
 
     # ---------------------------------------------------------------- commands
     def track_lane(self, vehicle_id: str) -> None:

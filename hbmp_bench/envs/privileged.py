@@ -1,0 +1,85 @@
+"""Privileged quantities of ``info["scene"]``: what the rule-based expert reads besides M_t and R_t.
+
+A learned agent sees only M_t and R_t; the expert (:mod:`hbmp_bench.agents.expert`), a
+demonstrator, may read the simulator's state. The fields this module measures (geometry only,
+numpy) are listed in :func:`path_actors`; the world adds the ones it reads from SUMO (see
+:meth:`hbmp_bench.envs.world.DrivingWorld` ``_observe``):
+
+  light_schedule   ((0, char now), (seconds until the next change, char), ...) of the next
+                   traffic light's link on the route, for the next minute; () where none
+  junction_exit_m  distance from the front bumper to the end of the junction the route crosses
+                   next (or is crossing) [m]; inf after the last junction
+  junction_foes    the vehicles on foe links of the junctions within ``FOE_RANGE_M``: one dict
+                   per foe with ``ego_dist_m`` / ``ego_exit_m`` (ego front to the start / end of
+                   the conflict area), ``foe_dist_m`` / ``foe_exit_m`` (the same for the foe),
+                   ``foe_speed_mps``, ``ego_yields`` / ``foe_yields`` (right of way of the two
+                   links, signals aside) and ``foe_signal`` (the foe's signal char before the
+                   junction, "" if none or passed); see :class:`hbmp_bench.sim.sumo.JunctionFoe`
+  fidelity         the world's fidelity (``event`` or ``continuous``)
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from hbmp_bench.planning.frame import Path
+
+LEADER_RANGE_M = 100.0
+"""Farthest leader reported, from the ego's front bumper [m]."""
+PEDESTRIAN_RANGE_M = 50.0
+"""Pedestrians up to this far ahead of the front bumper along the path are reported [m] ..."""
+PEDESTRIAN_LATERAL_M = 10.0
+"""... when within this lateral distance of the path [m]."""
+CORRIDOR_MARGIN_M = 0.3
+"""An actor is in the ego's corridor when its footprint comes within the ego's half width plus
+this margin of the path [m]."""
+FOE_RANGE_M = 60.0
+"""Junctions up to this far ahead are searched for foes [m]."""
+
+
+def path_actors(path: Path, ego_xy: np.ndarray, ego_length: float, ego_width: float, xy: np.ndarray,
+                yaw: np.ndarray, speed: np.ndarray, length: np.ndarray, width: np.ndarray,
+                is_pedestrian: np.ndarray) -> dict:
+    """The actors near the followed lane's centreline ``path``, measured along it.
+
+    Args:
+        path: the centreline the ego follows (its lane, through the junctions of its route).
+        ego_xy: (2,) ego footprint centre [m]; ego_length / ego_width: its footprint [m].
+        xy, yaw, speed, length, width, is_pedestrian: (K,) the other actors (centres [m],
+            headings [rad], speeds [m/s], footprints [m]).
+
+    Returns:
+        ``leader_gap_m``: free distance from the ego's front bumper to the nearest actor ahead
+        whose footprint lies in the ego's corridor (vehicle or pedestrian), inf if none within
+        ``LEADER_RANGE_M``; ``leader_speed_mps``: that actor's speed along the path [m/s] (0 if
+        none; negative when it comes towards the ego); ``pedestrians``: ((s, d, v_s, v_d), ...) for
+        every pedestrian ahead within ``PEDESTRIAN_RANGE_M`` and ``PEDESTRIAN_LATERAL_M``: its
+        distance along the path from the ego's front bumper [m], signed lateral offset (left
+        positive) [m] and velocity along / across the path (left positive) [m/s], nearest first.
+    """
+    out = {"leader_gap_m": float("inf"), "leader_speed_mps": 0.0, "pedestrians": ()}
+    if len(xy) == 0:
+        return out
+    s_ego, _ = path.frenet(ego_xy)
+    front = float(s_ego) + ego_length / 2
+    near = np.hypot(*(xy - ego_xy).T) < LEADER_RANGE_M + ego_length + 10.0
+    if not near.any():
+        return out
+    idx = np.nonzero(near)[0]
+    s, d, theta, _ = path.project(xy[idx], yaw[idx])
+    s, d, theta = np.atleast_1d(s), np.atleast_1d(d), np.atleast_1d(theta)
+    c, sn = np.abs(np.cos(theta)), np.abs(np.sin(theta))
+    half_long = length[idx] / 2 * c + width[idx] / 2 * sn
+    half_lat = length[idx] / 2 * sn + width[idx] / 2 * c
+    gap = s - half_long - front
+    v_s, v_d = speed[idx] * np.cos(theta), speed[idx] * np.sin(theta)
+    in_corridor = (np.abs(d) - half_lat < ego_width / 2 + CORRIDOR_MARGIN_M) & (s > front) & (gap < LEADER_RANGE_M)
+    if in_corridor.any():
+        k = int(np.argmin(np.where(in_corridor, gap, np.inf)))
+        out["leader_gap_m"] = float(max(gap[k], 0.0))
+        out["leader_speed_mps"] = float(v_s[k])
+    ped = is_pedestrian[idx] & (s - front > -ego_length) & (s - front < PEDESTRIAN_RANGE_M) & (np.abs(d) < PEDESTRIAN_LATERAL_M)
+    order = np.argsort(s[ped])
+    out["pedestrians"] = tuple((float(a), float(b), float(e), float(f)) for a, b, e, f in
+                               zip((s[ped] - front)[order], d[ped][order], v_s[ped][order], v_d[ped][order]))
+    return out
