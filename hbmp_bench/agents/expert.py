@@ -59,8 +59,10 @@ class Target:
     ``hard``: a line the motion planner does not see (a stop line, a conflict area): checked
     against the longest a behavior can run; the others (a leader, a pedestrian, a speed cap)
     against a typical behavior, since the planner itself brakes for actors in its lane.
-    ``from_s`` / ``until_s``: the target holds only for a car that would reach ``at_m``, at the
-    speed it drives then, within this window [s from now] (a light's red phase); always if (0, inf).
+    ``from_s`` / ``until_s``: the target holds only while a zone beyond ``at_m`` is taken (a red
+    phase, a foe or a pedestrian crossing) [s from now]; a car that, at the speed it drives, has
+    left the zone (``zone_m`` [m] beyond ``at_m``, its own length included) before ``from_s`` or
+    gets to ``at_m`` after ``until_s`` need not stop. Always taken if (0, inf).
     """
 
     at_m: float
@@ -69,6 +71,17 @@ class Target:
     hard: bool = False
     from_s: float = 0.0
     until_s: float = INF
+    zone_m: float = 0.0
+
+    def passes_outside(self, v: float, v_to: float) -> bool:
+        """Whether a car at ``v`` [m/s] that goes to ``v_to`` and holds it misses the window: it
+        leaves the zone before it (reaching ``v_to`` gently, at 1.5 m/s²) or gets there after it
+        (at ``v_to`` at once)."""
+        if self.from_s <= 0.0 and self.until_s == INF:
+            return False
+        leave_s = ExpertAgent._time_to(self.at_m + self.zone_m, v, accel=1.5, v_max=v_to)
+        enter_s = max(self.at_m, 0.0) / max(v, v_to, 0.1)
+        return leave_s < self.from_s or enter_s > self.until_s
 
 
 @dataclass(frozen=True)
@@ -148,7 +161,9 @@ class ExpertAgent:
         """Time [s] to drive ``distance_m`` from speed ``v`` accelerating at ``accel`` up to ``v_max``."""
         if distance_m <= 0.0:
             return 0.0
-        v_max = max(v_max, v, 0.1)
+        if accel <= 0.0 or v_max <= v:
+            return distance_m / v if v > 0.0 else INF
+        v_max = max(v_max, 0.1)
         t_acc = (v_max - v) / accel
         d_acc = v * t_acc + 0.5 * accel * t_acc * t_acc
         if distance_m <= d_acc:
@@ -161,12 +176,8 @@ class ExpertAgent:
         ``hold_s`` [s] (``t.hard_s`` for hard targets) still lets a chain of speed_down meet
         every target."""
         for g in targets:
-            if v_to <= g.speed_mps + tolerance:
+            if v_to <= g.speed_mps + tolerance or g.passes_outside(v, v_to):
                 continue
-            if g.from_s > 0.0 or g.until_s < INF:
-                reach_s = g.at_m / v_to
-                if reach_s < g.from_s or reach_s > g.until_s:
-                    continue  # it gets there before or after the window
             travel = max(v, v_to) * (max(hold_s, t.hard_s) if g.hard else hold_s)
             if g.at_m <= 0.0 or travel + (v_to ** 2 - g.speed_mps ** 2) / (2.0 * t.stop_decel) > g.at_m:
                 return False
@@ -211,20 +222,21 @@ class ExpertAgent:
         return out
 
     def _rule_red_light(self, scene: dict, t: Timing) -> list[Target]:
-        light, d, v = scene["light"], scene["stop_distance_m"], scene["speed_mps"]
+        light, d = scene.get("next_light", scene["light"]), scene.get("next_light_m", scene["stop_distance_m"])
+        v = scene["speed_mps"]
         if not light or light not in RED + YELLOW + GREEN or not math.isfinite(d):
             return []
         schedule = scene.get("light_schedule") or ((0.0, light),)
         if light not in RED and not self._stop_possible(v, d, t):
             return []  # a yellow (or a green about to turn) it cannot stop for: go through
-        # do not reach the line from the end of green (of yellow, if it cannot stop) until it is
-        # green again (the light's schedule; without one: from now, until never)
+        # do not reach the line from the end of green until it is green again (the light's
+        # schedule; without one: from now, until never)
         stop_from = next((at for at, c in schedule if c not in GREEN), INF)
         if stop_from == INF:
             return []
         green_again = next((at for at, c in schedule if at > stop_from and c in GREEN), INF)
-        return [Target(d - self.stop_margin_m, 0.0, "red_light", hard=True,
-                       from_s=max(stop_from - 0.5, 0.0), until_s=green_again + 0.5)]
+        return [Target(d - self.stop_margin_m, 0.0, "red_light", hard=True, from_s=max(stop_from - 0.5, 0.0),
+                       until_s=green_again + 0.5, zone_m=self.stop_margin_m)]
 
     def _rule_leader_gap(self, scene: dict, occupancy: np.ndarray, t: Timing) -> list[Target]:
         gap = scene.get("leader_gap_m")
@@ -248,7 +260,7 @@ class ExpertAgent:
         return [Target(d - 1.0, 0.0, "junction_clear", hard=True)] if blocked else []
 
     def _rule_yield(self, scene: dict, t: Timing) -> list[Target]:
-        v, light, out = scene["speed_mps"], scene["light"], []
+        light, out = scene["light"], []
         before_line = not scene["in_junction"] and scene["stop_distance_m"] > 0.5
         for f in scene.get("junction_foes", ()):
             if f["foe_signal"] in RED or f["ego_exit_m"] + EGO_LENGTH_M < 0.0 or f["foe_exit_m"] + EGO_LENGTH_M < 0.0:
@@ -261,22 +273,16 @@ class ExpertAgent:
             gives_way = (f["foe_yields"] and not f["ego_yields"]) or (f["foe_signal"] == "g" and light == "G")
             if v_foe < 0.5 and gives_way:
                 continue  # and waits
-            if v_foe < 0.5:
-                foe_in = self._time_to(f["foe_dist_m"], v_foe, accel=2.6)
-                foe_out = self._time_to(f["foe_exit_m"] + EGO_LENGTH_M, v_foe, accel=2.6)
-            else:
-                foe_in = max(f["foe_dist_m"], 0.0) / v_foe
-                foe_out = (f["foe_exit_m"] + EGO_LENGTH_M) / v_foe
-            ego_in = self._time_to(f["ego_dist_m"], v, v_max=6.0)
-            ego_out = self._time_to(f["ego_exit_m"] + EGO_LENGTH_M, v, v_max=6.0)
-            m = self.foe_margin_s
-            if ego_in < foe_out + m and foe_in < ego_out + m:
-                at = scene["stop_distance_m"] - 1.0 if before_line else f["ego_dist_m"] - self.stop_margin_m
-                out.append(Target(at, 0.0, "yield", hard=True))
+            # when the foe is in the conflict area (a standing foe may start at any time)
+            foe_in = self._time_to(f["foe_dist_m"], v_foe, accel=2.6 if v_foe < 0.5 else 0.0)
+            foe_out = self._time_to(f["foe_exit_m"] + EGO_LENGTH_M, v_foe, accel=2.6 if v_foe < 0.5 else 0.0)
+            at = scene["stop_distance_m"] - 1.0 if before_line else f["ego_dist_m"] - self.stop_margin_m
+            out.append(Target(at, 0.0, "yield", hard=True, from_s=foe_in - self.foe_margin_s,
+                              until_s=foe_out + self.foe_margin_s, zone_m=f["ego_exit_m"] + EGO_LENGTH_M - at))
         return out
 
     def _rule_pedestrians(self, scene: dict, t: Timing) -> list[Target]:
-        v, out = scene["speed_mps"], []
+        out = []
         for s, d, v_s, v_d in scene.get("pedestrians", ()):
             # the ego's half width and a margin: wider for a walking pedestrian than for one who
             # stands (e.g. at the kerb, waiting to cross)
@@ -288,10 +294,9 @@ class ExpertAgent:
                 p_in, p_out = (abs(d) - w) / abs(v_d), (abs(d) + w) / abs(v_d)
             else:
                 continue
-            e_in = self._time_to(s - 1.0, v, v_max=6.0)
-            e_out = self._time_to(s + EGO_LENGTH_M + 1.0, v, v_max=6.0)
-            if e_in < p_out + 1.0 and p_in < e_out + 1.0:
-                out.append(Target(s - self.stop_margin_m, 0.0, "pedestrian"))
+            at = s - self.stop_margin_m
+            out.append(Target(at, 0.0, "pedestrian", hard=True, from_s=p_in - 1.0, until_s=p_out + 1.0,
+                              zone_m=self.stop_margin_m + EGO_LENGTH_M + 1.0))
         return out
 
     def _rule_route_lane(self, scene: dict, occupancy: np.ndarray, mask: np.ndarray, t: Timing,

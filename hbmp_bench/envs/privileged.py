@@ -5,8 +5,11 @@ demonstrator, may read the simulator's state. The fields this module measures (g
 numpy) are listed in :func:`path_actors`; the world adds the ones it reads from SUMO (see
 :meth:`hbmp_bench.envs.world.DrivingWorld` ``_observe``):
 
-  light_schedule   ((0, char now), (seconds until the next change, char), ...) of the next
-                   traffic light's link on the route, for the next minute; () where none
+  next_light       signal char of the next traffic light on the route, however far (also beyond
+                   junctions without lights, unlike R_t's l_g/l_y/l_r and ``light``); "" if none
+  next_light_m     distance from the front bumper to its stop line [m]; inf if none
+  light_schedule   ((0, char now), (seconds until the next change, char), ...) of that light's
+                   link, for the next minute; () where none
   junction_exit_m  distance from the front bumper to the end of the junction the route crosses
                    next (or is crossing) [m]; inf after the last junction
   junction_foes    the vehicles on foe links of the junctions within ``FOE_RANGE_M``: one dict

@@ -418,7 +418,7 @@ class DrivingWorld:
             actors.xy, actors.yaw, actors.length, actors.width,
         )
         scene["goal_distance_m"] = float(np.hypot(*(ego.xy - self.goal_xy)))
-        scene.update(self._privileged(ego, light if scene["light"] else None))
+        scene.update(self._privileged(ego, light))
         info = {
             "action_mask": self.action_mask(),
             "events": {k: getattr(events, k) for k in EVENT_KINDS},
@@ -474,6 +474,8 @@ class DrivingWorld:
         path = self._scene_path(self._followed_lane or ego.lane, self.route[k + 1: k + 4])
         out = path_actors(path, ego.xy, EGO_TYPE.length, EGO_TYPE.width, actors.xy, actors.yaw, actors.speed,
                           actors.length, actors.width, actors.is_pedestrian)
+        out["next_light"] = "" if light is None else light[3]
+        out["next_light_m"] = float("inf") if light is None else float(light[2])
         out["light_schedule"] = () if light is None else self.sim.signal_schedule(light[0], light[1])
         out["junction_exit_m"] = self._junction_exit_m(ego)
         out["junction_foes"] = tuple(
