@@ -256,14 +256,18 @@ class ExpertAgent:
         gap, v_lead = scene.get("leader_gap_m", INF), scene.get("leader_speed_mps", 0.0)
         if not (math.isfinite(exit_m) and math.isfinite(gap)) or d < 0.5:
             return []
-        blocked = d - 1.0 < gap < exit_m + EGO_LENGTH_M + self.standstill_gap_m and v_lead < 3.0
+        # the leader stands in the junction, or so close behind it that the ego would stop inside
+        blocked = d - 1.0 < gap < exit_m + EGO_LENGTH_M + self.standstill_gap_m and v_lead < 1.0
         return [Target(d - 1.0, 0.0, "junction_clear", hard=True)] if blocked else []
 
     def _rule_yield(self, scene: dict, t: Timing) -> list[Target]:
         light, out = scene["light"], []
         before_line = not scene["in_junction"] and scene["stop_distance_m"] > 0.5
+        exit_m = scene.get("junction_exit_m", INF)
         for f in scene.get("junction_foes", ()):
-            if f["foe_signal"] in RED or f["ego_exit_m"] + EGO_LENGTH_M < 0.0 or f["foe_exit_m"] + EGO_LENGTH_M < 0.0:
+            if f["ego_dist_m"] > exit_m:
+                continue  # a conflict at a later junction: judged once the ego has crossed this one
+            if (f["foe_signal"] and f["foe_signal"] in RED) or f["ego_exit_m"] + EGO_LENGTH_M < 0.0 or f["foe_exit_m"] + EGO_LENGTH_M < 0.0:
                 continue  # held by its light, or one of the two has passed the conflict area
             if f["ego_dist_m"] <= 0.5:
                 continue  # the ego is in the conflict area: clear it
