@@ -12,12 +12,9 @@ numpy) are listed in :func:`path_actors`; the world adds the ones it reads from 
                    link, for the next minute; () where none
   junction_exit_m  distance from the front bumper to the end of the junction the route crosses
                    next (or is crossing) [m]; inf after the last junction
-  junction_foes    the vehicles on foe links of the junctions within ``FOE_RANGE_M``: one dict
-                   per foe with ``ego_dist_m`` / ``ego_exit_m`` (ego front to the start / end of
-                   the conflict area), ``foe_dist_m`` / ``foe_exit_m`` (the same for the foe),
-                   ``foe_speed_mps``, ``ego_yields`` / ``foe_yields`` (right of way of the two
-                   links, signals aside) and ``foe_signal`` (the foe's signal char before the
-                   junction, "" if none or passed); see :class:`hbmp_bench.sim.sumo.JunctionFoe`
+  junction_foes    the vehicles on or before (up to ``FOE_RANGE_M``) the links that conflict with
+                   the ego's link through the junction ahead (or the one it is in), see
+                   :func:`junction_foes`
   fidelity         the world's fidelity (``event`` or ``continuous``)
 """
 
@@ -36,8 +33,8 @@ PEDESTRIAN_LATERAL_M = 10.0
 CORRIDOR_MARGIN_M = 0.3
 """An actor is in the ego's corridor when its footprint comes within the ego's half width plus
 this margin of the path [m]."""
-FOE_RANGE_M = 60.0
-"""Junctions up to this far ahead are searched for foes [m]."""
+FOE_RANGE_M = 80.0
+"""Vehicles up to this far before a conflicting link are reported [m]."""
 
 
 def path_actors(path: Path, ego_xy: np.ndarray, ego_length: float, ego_width: float, xy: np.ndarray,
@@ -86,3 +83,46 @@ def path_actors(path: Path, ego_xy: np.ndarray, ego_length: float, ego_width: fl
     out["pedestrians"] = tuple((float(a), float(b), float(e), float(f)) for a, b, e, f in
                                zip((s[ped] - front)[order], d[ped][order], v_s[ped][order], v_d[ped][order]))
     return out
+
+
+def gives_way(signal: str, state: str, other_signal: str, other_state: str) -> bool:
+    """Whether a link must give way to another at the junction: with lights, a permissive green
+    (``g``) to a priority green (``G``); without, a minor or stop link (``m``, ``s``) to a major
+    one (``M``). Links of equal rank (``=``, all-way stops, two permissive greens) give way to
+    neither."""
+    if signal and other_signal:
+        return signal == "g" and other_signal == "G"
+    if not signal and not other_signal:
+        return state in "ms" and other_state == "M"
+    return False
+
+
+def junction_foes(entry_m: float, signal: str, state: str, conflicts, users, foe_signals) -> tuple[dict, ...]:
+    """The ``junction_foes`` of the scene: one dict per vehicle on a conflicting link.
+
+    Args:
+        entry_m: distance from the ego's front bumper to the start of its link [m] (negative inside).
+        signal / state: the ego link's signal char ("" without a light) and static state.
+        conflicts: the :class:`hbmp_bench.maps.roadnet.LinkConflict` s of the ego's link.
+        users: per conflict, the vehicles on or before the foe link: (id, distance from the
+            front bumper to the link's start [m], negative inside, speed [m/s]).
+        foe_signals: per conflict, the foe link's signal char ("" without a light).
+
+    Returns:
+        dicts with ``ego_dist_m`` / ``ego_exit_m``: distance from the ego's front bumper to the
+        start / end of the conflict area [m]; ``foe_dist_m`` / ``foe_exit_m``: the same for the
+        foe's front bumper; ``foe_speed_mps``; ``ego_yields`` / ``foe_yields`` (:func:`gives_way`);
+        ``foe_signal``: the foe's signal before it enters the junction ("" without a light or once
+        inside).
+    """
+    out = []
+    for c, link_users, foe_signal in zip(conflicts, users, foe_signals):
+        for _, dist, speed in link_users:
+            out.append({
+                "ego_dist_m": entry_m + c.at_m, "ego_exit_m": entry_m + c.clear_m,
+                "foe_dist_m": dist + c.foe_at_m, "foe_exit_m": dist + c.foe_clear_m, "foe_speed_mps": float(speed),
+                "ego_yields": gives_way(signal, state, foe_signal, c.foe.state),
+                "foe_yields": gives_way(foe_signal, c.foe.state, signal, state),
+                "foe_signal": foe_signal if dist > 0.0 else "",
+            })
+    return tuple(out)

@@ -15,9 +15,9 @@ import numpy as np
 from hbmp_bench import __version__
 from hbmp_bench.envs.drivers import FIDELITIES, LANE_CHANGE_CUTOFF_M, ContinuousConfig, ContinuousDriver, EventDriver, feasible_behaviors
 from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, followed_path, road_profile
-from hbmp_bench.envs.privileged import FOE_RANGE_M, LEADER_RANGE_M, path_actors
+from hbmp_bench.envs.privileged import FOE_RANGE_M, LEADER_RANGE_M, junction_foes, path_actors
 from hbmp_bench.maps import net_path
-from hbmp_bench.maps.roadnet import RoadNetwork
+from hbmp_bench.maps.roadnet import RoadNetwork, project_on_polyline
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents, StopLine
 from hbmp_bench.metrics.geometry import LaneLocator, stop_line_of
 from hbmp_bench.metrics.records import EpisodeRecord, driving_score
@@ -467,6 +467,31 @@ class DrivingWorld:
         at = path.position(k, ego.lane_pos) if on_edge else path.junction_position(k, self._front(ego))
         return max(float(path.edge_start[k + 1]) - at, 0.0)
 
+    def _junction_foes(self, ego) -> tuple[dict, ...]:
+        """The vehicles on the links that conflict with the ego's next (or current) link through a
+        junction (:func:`hbmp_bench.envs.privileged.junction_foes`)."""
+        lane = self._followed_lane
+        if lane not in self.net.lanes:
+            return ()
+        nxt = next(iter(self._next_edges(1)), None)
+        link = next((c for c in self.net.connections[self.net.lane(lane).edge] if c.from_lane == lane and c.to_edge == nxt),
+                    None)
+        shape = self.net.link_shape(link) if link is not None else ()
+        if len(shape) < 2:
+            return ()
+        followed = self.net.lane(lane)
+        ends, direction = stop_line_of(followed.shape, followed.width)
+        front = self._front(ego)
+        entry = float((ends[0] - front) @ direction)
+        if entry <= 0.0:
+            entry = -project_on_polyline(shape, front)[0]
+        conflicts = self.net.link_conflicts(link)
+        users = [tuple(u for u in self.sim.link_users(c.foe.from_lane, self.net.link_lanes(c.foe), FOE_RANGE_M)
+                       if u[0] != EGO_ID) for c in conflicts]
+        signals = [self.sim.light_state(c.foe.tls, c.foe.link_index) if c.foe.tls else "" for c in conflicts]
+        signal = self.sim.light_state(link.tls, link.link_index) if link.tls else ""
+        return junction_foes(entry, signal, link.state, conflicts, users, signals)
+
     def _privileged(self, ego, light: tuple[str, int, float, str] | None) -> dict:
         """The privileged fields of ``info["scene"]`` (see :mod:`hbmp_bench.envs.privileged`)."""
         k = self._route_index()
@@ -478,11 +503,7 @@ class DrivingWorld:
         out["next_light_m"] = float("inf") if light is None else float(light[2])
         out["light_schedule"] = () if light is None else self.sim.signal_schedule(light[0], light[1])
         out["junction_exit_m"] = self._junction_exit_m(ego)
-        out["junction_foes"] = tuple(
-            {"ego_dist_m": f.ego_dist, "ego_exit_m": f.ego_exit_dist, "foe_dist_m": f.foe_dist,
-             "foe_exit_m": f.foe_exit_dist, "foe_speed_mps": f.foe_speed, "ego_yields": f.ego_yields,
-             "foe_yields": f.foe_yields, "foe_signal": f.foe_signal}
-            for f in self.sim.junction_foes(EGO_ID, FOE_RANGE_M))
+        out["junction_foes"] = self._junction_foes(ego)
         out["fidelity"] = self.config.fidelity
         return out
 

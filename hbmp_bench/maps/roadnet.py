@@ -35,7 +35,9 @@ class Connection:
 
     ``via`` is the first internal (junction) lane the link runs over, ``""`` if none;
     ``direction`` is SUMO's link direction (``s`` straight, ``l``/``L`` left, ``r``/``R``
-    right, ``t`` turnaround); ``tls``/``link_index`` name the traffic light that controls it.
+    right, ``t`` turnaround); ``tls``/``link_index`` name the traffic light that controls it;
+    ``state`` is SUMO's right of way of a link without a light (``M`` major, ``m`` minor, ``=``
+    equal, ``s`` stop, ``w`` all-way stop; ``o`` where a light controls it).
     """
 
     from_edge: str
@@ -46,6 +48,26 @@ class Connection:
     direction: str
     tls: str
     link_index: int
+    state: str = "M"
+
+
+@dataclass(frozen=True)
+class LinkConflict:
+    """Where another link through the same junction comes within a car's width of a link (a
+    crossing, a merge, a close pass): from ``at_m`` to ``clear_m`` [m] along this link's junction
+    lanes, ``foe_at_m`` to ``foe_clear_m`` [m] along the ``foe`` link's, both from the junction's
+    entry (the stop line)."""
+
+    foe: Connection
+    at_m: float
+    clear_m: float
+    foe_at_m: float
+    foe_clear_m: float
+
+
+CONFLICT_WIDTH_M = 2.2
+"""Two links conflict where their centrelines come closer than this [m] (two car widths' halves
+and a margin)."""
 
 
 @dataclass(frozen=True)
@@ -135,6 +157,7 @@ class RoadNetwork:
                             direction=c.getDirection(),
                             tls=c.getTLSID() or "",
                             link_index=int(c.getTLLinkIndex()),
+                            state=c.getState() or "M",
                         )
                     )
             self.connections[edge_id] = tuple(conns)
@@ -321,6 +344,35 @@ class RoadNetwork:
             lane = self.follow(lane, link.to_edge)
         return tuple(lanes)
 
+    def link_shape(self, link: Connection) -> np.ndarray:
+        """The centreline (N, 2) [m] of a link's junction lanes, from the stop line on (empty if none)."""
+        lanes = self.link_lanes(link)
+        if not lanes:
+            return np.zeros((0, 2))
+        return np.vstack([self.lane(ln).shape for ln in lanes])
+
+    @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
+    def link_conflicts(self, link: Connection) -> tuple[LinkConflict, ...]:
+        """The links of the same junction (from other lanes) whose centreline comes within
+        ``CONFLICT_WIDTH_M`` of ``link``'s: crossings, merges, close passes (pure geometry of the
+        junction lanes; who has the right of way is the links' state or signal)."""
+        node = self.edge_from_to[link.from_edge][1]
+        shape = self.link_shape(link)
+        if len(shape) < 2:
+            return ()
+        out = []
+        for edge, (_, to_node) in self.edge_from_to.items():
+            if to_node != node:
+                continue
+            for foe in self.connections[edge]:
+                foe_shape = self.link_shape(foe)
+                if foe.from_lane == link.from_lane or len(foe_shape) < 2:
+                    continue
+                zone, foe_zone = _close_stretch(shape, foe_shape), _close_stretch(foe_shape, shape)
+                if zone is not None and foe_zone is not None:
+                    out.append(LinkConflict(foe, *zone, *foe_zone))
+        return tuple(out)
+
     def route_link(self, edge: str, to_edge: str, lane_id: str, allowed: frozenset[str] | None = None) -> Connection:
         """The link from ``edge`` onto ``to_edge`` that a car in ``lane_id`` (a lane of ``edge``) takes:
         its own lane's link where it has one (the one that keeps the lane index, if several), else
@@ -437,6 +489,40 @@ class RoutePath:
             if off_m < best_m:
                 best_m, at = off_m, lane.start + arc_m
         return float(np.clip(at, lo, hi))
+
+
+def _close_stretch(shape: np.ndarray, other: np.ndarray, spacing: float = 0.5) -> tuple[float, float] | None:
+    """The first stretch (start, end) [m] along a polyline (N, 2) that lies within
+    ``CONFLICT_WIDTH_M`` of another (M, 2); None if none does."""
+    s, points = _sample_polyline(shape, spacing)
+    _, dist = _project_points(other, points)
+    close = np.flatnonzero(dist < CONFLICT_WIDTH_M)
+    if not len(close):
+        return None
+    run = close[: int(np.argmax(np.diff(np.append(close, close[-1] + 2)) > 1)) + 1]
+    return float(s[run[0]]), float(s[run[-1]])
+
+
+def _sample_polyline(shape: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Arc lengths (M,) [m] and points (M, 2) every ``spacing`` [m] along a polyline, ends included."""
+    seg = np.hypot(*np.diff(shape, axis=0).T)
+    total = float(seg.sum())
+    s = np.append(np.arange(0.0, total, spacing), total)
+    return s, np.array([point_along(shape, x) for x in s])
+
+
+def _project_points(shape: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For points (M, 2): arc length [m] of the nearest point of the polyline (N, 2) and the distance to it [m]."""
+    a, b = shape[:-1], shape[1:]
+    ab = b - a
+    seg_len2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
+    t = np.clip(np.einsum("mij,ij->mi", points[:, None, :] - a[None], ab) / seg_len2, 0.0, 1.0)
+    nearest = a[None] + t[..., None] * ab[None]
+    dist = np.hypot(*(points[:, None, :] - nearest).transpose(2, 0, 1))
+    i = np.argmin(dist, axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(np.sqrt(seg_len2))])
+    rows = np.arange(len(points))
+    return cum[i] + t[rows, i] * np.sqrt(seg_len2[i]), dist[rows, i]
 
 
 def project_on_polyline(shape: np.ndarray, point: np.ndarray) -> tuple[float, float]:

@@ -107,34 +107,6 @@ class VehicleState:
 
 
 @dataclass(frozen=True)
-class JunctionFoe:
-    """A vehicle whose link through a junction ahead crosses or merges with the ego's (SUMO's foe
-    links, ``vehicle.getJunctionFoes``). Distances are along each vehicle's own lanes to the
-    conflict area (the crossing or merging point) [m]; SUMO measures them from the front bumper.
-
-    Attributes:
-        id: the foe vehicle.
-        ego_dist / ego_exit_dist: ego's distance to the start / end of the conflict area [m].
-        foe_dist / foe_exit_dist: the foe's distance to the start / end of the conflict area [m].
-        foe_speed: the foe's speed [m/s].
-        ego_yields / foe_yields: the right of way of the two links (SUMO's junction logic): the
-            ego must yield to the foe / the foe must yield to the ego (traffic lights left aside).
-        foe_signal: the signal char of the foe's link when a traffic light controls it and the foe
-            has not passed it yet (``r``, ``y``, ``G`` ...), else "".
-    """
-
-    id: str
-    ego_dist: float
-    ego_exit_dist: float
-    foe_dist: float
-    foe_exit_dist: float
-    foe_speed: float
-    ego_yields: bool
-    foe_yields: bool
-    foe_signal: str
-
-
-@dataclass(frozen=True)
 class LightAhead:
     """The next traffic light on a vehicle's route: its state char and distance to the stop line [m]."""
 
@@ -370,7 +342,7 @@ class SumoSim:
         now = libsumo.simulation.getTime()
         char = libsumo.trafficlight.getRedYellowGreenState(tls)[link_index]
         out = [(0.0, char)]
-        t = max(libsumo.trafficlight.getNextSwitch(tls) - now, 0.0)
+        t = max(libsumo.trafficlight.getNextSwitch(tls) - now, 1e-3)  # a switch due now: just after now
         for k in range(1, 4 * len(phases) + 1):
             if t > horizon_s:
                 break
@@ -380,16 +352,22 @@ class SumoSim:
             t += duration
         return tuple(out)
 
-    def junction_foes(self, vehicle_id: str, distance_m: float) -> tuple[JunctionFoe, ...]:
-        """The vehicles on foe links of the junctions within ``distance_m`` [m] ahead of a vehicle
-        on its route (see :class:`JunctionFoe`)."""
+    def link_users(self, from_lane: str, junction_lanes: tuple[str, ...], horizon_m: float) -> tuple[tuple[str, float, float], ...]:
+        """The vehicles on a link's junction lanes and those within ``horizon_m`` [m] of it on
+        ``from_lane`` whose next link it is: (id, distance [m] from the front bumper to the link's
+        start, negative inside it, speed [m/s])."""
         out = []
-        for foe, ego_dist, foe_dist, ego_exit, foe_exit, _, _, ego_yields, foe_yields in \
-                libsumo.vehicle.getJunctionFoes(vehicle_id, float(distance_m)):
-            lights = libsumo.vehicle.getNextTLS(foe)
-            signal = lights[0][3] if lights and lights[0][2] <= foe_dist + 1.0 else ""
-            out.append(JunctionFoe(foe, float(ego_dist), float(ego_exit), float(foe_dist), float(foe_exit),
-                                   float(libsumo.vehicle.getSpeed(foe)), bool(ego_yields), bool(foe_yields), signal))
+        offset = 0.0
+        for lane in junction_lanes:
+            for vid in libsumo.lane.getLastStepVehicleIDs(lane):
+                out.append((vid, -(offset + libsumo.vehicle.getLanePosition(vid)), libsumo.vehicle.getSpeed(vid)))
+            offset += libsumo.lane.getLength(lane)
+        length = libsumo.lane.getLength(from_lane)
+        for vid in libsumo.lane.getLastStepVehicleIDs(from_lane):
+            dist = length - libsumo.vehicle.getLanePosition(vid)
+            links = libsumo.vehicle.getNextLinks(vid) if dist <= horizon_m else ()
+            if links and links[0][4] == junction_lanes[0]:
+                out.append((vid, dist, libsumo.vehicle.getSpeed(vid)))
         return tuple(out)
 
     # ---------------------------------------------------------------- commands
