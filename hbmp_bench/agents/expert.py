@@ -106,9 +106,12 @@ class Timing:
     accel: float
 
     @staticmethod
-    def for_period(period_s: float, continuous: bool) -> "Timing":
+    def for_period(period_s: float, continuous: bool, settled: bool = False) -> "Timing":
+        """Timing of a behavior in event fidelity (``period_s``) or with the motion planner,
+        ``settled`` on a straight lane (small lane errors, no curve ahead, not in a junction)."""
         if continuous:
-            return Timing(keep_s=1.5, speed_up_s=2.0, lane_change_s=3.0, hard_s=8.0, stop_decel=3.0, accel=INF)
+            return Timing(keep_s=1.5, speed_up_s=2.0, lane_change_s=3.0, hard_s=2.0 if settled else 8.0,
+                          stop_decel=3.0, accel=INF)
         p = max(period_s, 0.1)
         return Timing(keep_s=p, speed_up_s=p, lane_change_s=p, hard_s=p, stop_decel=3.5, accel=2.6)
 
@@ -154,7 +157,9 @@ class ExpertAgent:
         period = float(info.get("duration_s", 0.1))
         fidelity = scene.get("fidelity")
         continuous = fidelity == "continuous" if fidelity else period > 0.2
-        return Timing.for_period(period, continuous)
+        settled = (abs(scene.get("lane_error_m", INF)) < 0.15 and abs(scene.get("heading_error_rad", INF)) < 0.03
+                   and scene.get("curvature_ahead", INF) < 0.01 and not scene["in_junction"])
+        return Timing.for_period(period, continuous, settled)
 
     @staticmethod
     def _time_to(distance_m: float, v: float, accel: float = 2.0, v_max: float = INF) -> float:
@@ -222,21 +227,24 @@ class ExpertAgent:
         return out
 
     def _rule_red_light(self, scene: dict, t: Timing) -> list[Target]:
-        light, d = scene.get("next_light", scene["light"]), scene.get("next_light_m", scene["stop_distance_m"])
-        v = scene["speed_mps"]
-        if not light or light not in RED + YELLOW + GREEN or not math.isfinite(d):
-            return []
-        schedule = scene.get("light_schedule") or ((0.0, light),)
-        if light not in RED and not self._stop_possible(v, d, t):
-            return []  # a yellow (or a green about to turn) it cannot stop for: go through
-        # do not reach the line from the end of green until it is green again (the light's
-        # schedule; without one: from now, until never)
-        stop_from = next((at for at, c in schedule if c not in GREEN), INF)
-        if stop_from == INF:
-            return []
-        green_again = next((at for at, c in schedule if at > stop_from and c in GREEN), INF)
-        return [Target(d - self.stop_margin_m, 0.0, "red_light", hard=True, from_s=max(stop_from - 0.5, 0.0),
-                       until_s=green_again + 0.5, zone_m=self.stop_margin_m)]
+        lights = scene.get("lights_ahead")
+        if lights is None:  # no privileged lights: the one ending the lane (R_t's)
+            lights = ((scene["stop_distance_m"], scene["light"], ((0.0, scene["light"]),)),) if scene["light"] else ()
+        out = []
+        for d, light, schedule in lights:
+            if light not in RED + YELLOW + GREEN or not math.isfinite(d):
+                continue
+            if light not in RED and not self._stop_possible(scene["speed_mps"], d, t):
+                continue  # a yellow (or a green about to turn) it cannot stop for: go through
+            # do not reach the line from the end of green until it is green again (the light's
+            # schedule; without one: from now, until never)
+            stop_from = next((at for at, c in schedule if c not in GREEN), INF)
+            if stop_from == INF:
+                continue
+            green_again = next((at for at, c in schedule if at > stop_from and c in GREEN), INF)
+            out.append(Target(d - self.stop_margin_m, 0.0, "red_light", hard=True, from_s=max(stop_from - 0.5, 0.0),
+                              until_s=green_again + 0.5, zone_m=self.stop_margin_m))
+        return out
 
     def _rule_leader_gap(self, scene: dict, occupancy: np.ndarray, t: Timing) -> list[Target]:
         gap = scene.get("leader_gap_m")
@@ -261,7 +269,7 @@ class ExpertAgent:
         return [Target(d - 1.0, 0.0, "junction_clear", hard=True)] if blocked else []
 
     def _rule_yield(self, scene: dict, t: Timing) -> list[Target]:
-        light, out = scene["light"], []
+        out = []
         before_line = not scene["in_junction"] and scene["stop_distance_m"] > 0.5
         exit_m = scene.get("junction_exit_m", INF)
         for f in scene.get("junction_foes", ()):
@@ -272,11 +280,8 @@ class ExpertAgent:
             if f["ego_dist_m"] <= 0.5:
                 continue  # the ego is in the conflict area: clear it
             v_foe = f["foe_speed_mps"]
-            # the foe gives way: its link yields to the ego's, or it has a permissive green (g)
-            # against the ego's priority green (G)
-            gives_way = (f["foe_yields"] and not f["ego_yields"]) or (f["foe_signal"] == "g" and light == "G")
-            if v_foe < 0.5 and gives_way:
-                continue  # and waits
+            if v_foe < 0.5 and not (f["ego_yields"] and before_line):
+                continue  # it stands: for the ego (its right of way, or the ego is in the junction already)
             # when the foe is in the conflict area (a standing foe may start at any time)
             foe_in = self._time_to(f["foe_dist_m"], v_foe, accel=2.6 if v_foe < 0.5 else 0.0)
             foe_out = self._time_to(f["foe_exit_m"] + EGO_LENGTH_M, v_foe, accel=2.6 if v_foe < 0.5 else 0.0)

@@ -5,17 +5,23 @@ demonstrator, may read the simulator's state. The fields this module measures (g
 numpy) are listed in :func:`path_actors`; the world adds the ones it reads from SUMO (see
 :meth:`hbmp_bench.envs.world.DrivingWorld` ``_observe``):
 
-  next_light       signal char of the next traffic light on the route, however far (also beyond
-                   junctions without lights, unlike R_t's l_g/l_y/l_r and ``light``); "" if none
-  next_light_m     distance from the front bumper to its stop line [m]; inf if none
-  light_schedule   ((0, char now), (seconds until the next change, char), ...) of that light's
-                   link, for the next minute; () where none
+  lights_ahead     the traffic lights on the route within ``LIGHTS_RANGE_M``, nearest first (also
+                   beyond junctions without lights, unlike R_t's l_g/l_y/l_r and ``light``): one
+                   (distance from the front bumper to the stop line [m], signal char, schedule) per
+                   light, the schedule ((0, char now), (seconds until the next change, char), ...)
+                   of its link for the next minute
   junction_exit_m  distance from the front bumper to the end of the junction the route crosses
                    next (or is crossing) [m]; inf after the last junction
   junction_foes    the vehicles on or before (up to ``FOE_RANGE_M``) the links that conflict with
                    the ego's link through the junction ahead (or the one it is in), see
                    :func:`junction_foes`
   fidelity         the world's fidelity (``event`` or ``continuous``)
+  lane_error_m, heading_error_rad, curvature_ahead
+                   continuous fidelity only: the ego's lateral offset [m] and heading error [rad]
+                   from the centreline the motion planner tracks, and that centreline's sharpest
+                   curvature [1/m] over the next 3 s; a behavior begun with small errors on a
+                   straight stretch ends after about its minimum duration, otherwise it may run to
+                   the planner's maximum (8 s)
 """
 
 from __future__ import annotations
@@ -33,6 +39,8 @@ PEDESTRIAN_LATERAL_M = 10.0
 CORRIDOR_MARGIN_M = 0.3
 """An actor is in the ego's corridor when its footprint comes within the ego's half width plus
 this margin of the path [m]."""
+LIGHTS_RANGE_M = 150.0
+"""Traffic lights up to this far ahead are reported [m]."""
 FOE_RANGE_M = 80.0
 """Vehicles up to this far before a conflicting link are reported [m]."""
 

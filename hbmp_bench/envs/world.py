@@ -15,7 +15,7 @@ import numpy as np
 from hbmp_bench import __version__
 from hbmp_bench.envs.drivers import FIDELITIES, LANE_CHANGE_CUTOFF_M, ContinuousConfig, ContinuousDriver, EventDriver, feasible_behaviors
 from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, followed_path, road_profile
-from hbmp_bench.envs.privileged import FOE_RANGE_M, LEADER_RANGE_M, junction_foes, path_actors
+from hbmp_bench.envs.privileged import FOE_RANGE_M, LEADER_RANGE_M, LIGHTS_RANGE_M, junction_foes, path_actors
 from hbmp_bench.maps import net_path
 from hbmp_bench.maps.roadnet import RoadNetwork, project_on_polyline
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents, StopLine
@@ -124,7 +124,7 @@ class DrivingWorld:
         self.done_reason = ""
         self._last_xy: np.ndarray | None = None
         self._ego = None
-        self._light = None
+        self._lights = ()
         self._actors = None
         self._followed_lane = ""
 
@@ -165,7 +165,7 @@ class DrivingWorld:
         self.detector = InfractionDetector(self.locator, self.goal_xy, episode.success_radius_m, episode.timeout_s)
         self._set_route(episode.route)
         self.reroutes = 0
-        self._light = self.sim.light_ahead(EGO_ID)
+        self._lights = self.sim.lights_ahead(EGO_ID)
         self._actors = self.sim.snapshot().without(EGO_ID)
         return self._observe(StepEvents())
 
@@ -320,7 +320,7 @@ class DrivingWorld:
         self.distance_m += float(np.hypot(*(state.xy - self._last_xy)))
         self._last_xy = state.xy
         self._update_progress(state)
-        self._light = self.sim.light_ahead(EGO_ID)
+        self._lights = self.sim.lights_ahead(EGO_ID)
         actors = snapshot.without(EGO_ID)
         lane = self._followed_lane
         ev = self.detector.update(
@@ -441,8 +441,8 @@ class DrivingWorld:
         SUMO's lane as a rule; but a pose pushed with ``moveToXY`` next to the end of a lane may be
         matched onto a junction lane while the front bumper has not reached the stop line yet:
         then the followed lane, and the signal of its link (the one the detectors judge)."""
-        light = None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance,
-                                                  self._light.state)
+        light = (self._lights[0].tls, self._lights[0].link_index, self._lights[0].distance,
+                 self._lights[0].state) if self._lights else None
         lane = self._followed_lane
         if ego.lane in self.net.lanes or lane not in self.net.lanes:
             return ego.lane, ego.lane_pos, light
@@ -499,13 +499,29 @@ class DrivingWorld:
         path = self._scene_path(self._followed_lane or ego.lane, self.route[k + 1: k + 4])
         out = path_actors(path, ego.xy, EGO_TYPE.length, EGO_TYPE.width, actors.xy, actors.yaw, actors.speed,
                           actors.length, actors.width, actors.is_pedestrian)
-        out["next_light"] = "" if light is None else light[3]
-        out["next_light_m"] = float("inf") if light is None else float(light[2])
-        out["light_schedule"] = () if light is None else self.sim.signal_schedule(light[0], light[1])
+        lights = [] if light is None else [light]
+        sumo_first = bool(self._lights) and light is not None and light[:2] == (self._lights[0].tls, self._lights[0].link_index)
+        for far in self._lights[1 if sumo_first else 0:]:
+            lights.append((far.tls, far.link_index, far.distance, far.state))
+        out["lights_ahead"] = tuple((float(d), state, self.sim.signal_schedule(tls, index))
+                                    for tls, index, d, state in lights if d <= LIGHTS_RANGE_M)
         out["junction_exit_m"] = self._junction_exit_m(ego)
         out["junction_foes"] = self._junction_foes(ego)
         out["fidelity"] = self.config.fidelity
+        if self.config.fidelity == "continuous":
+            out.update(self._lane_tracking(ego))
         return out
+
+    def _lane_tracking(self, ego) -> dict:
+        """How settled the motion planner is on the lane it follows: the ego's lateral offset [m] and
+        heading error [rad] from the centreline the planner tracks, and the sharpest curvature
+        [1/m] of that centreline over the next 3 s (at least 15 m). A behavior begun settled on a
+        straight lane converges in about its minimum duration; otherwise it may run much longer."""
+        path = self.driver.lane_path(self._followed_lane or ego.lane, self._next_edges())
+        s, e, theta, _ = path.project(ego.xy, ego.yaw)
+        ahead = np.arange(s, s + max(3.0 * ego.speed, 5.0) + 10.0, 1.0)
+        return {"lane_error_m": float(e), "heading_error_rad": float(theta),
+                "curvature_ahead": float(np.max(np.abs(path.point_at(ahead)[3])))}
 
     def scene_view(self, caption: str = ""):
         """What a top-down picture of this instant needs (:class:`hbmp_bench.render.SceneView`)."""

@@ -20,8 +20,8 @@ def situation(*, occupancy=None, duration_s=1.0, mask=(1, 1, 1, 1, 1), road=None
     base = {
         "speed_mps": 10.0, "speed_limit_mps": 13.89, "in_junction": False, "route_lane_offset": 0,
         "stop_distance_m": 300.0, "light": "", "turn_ahead": "", "goal_distance_m": 500.0,
-        "leader_gap_m": INF, "leader_speed_mps": 0.0, "pedestrians": (), "next_light": "", "next_light_m": INF,
-        "light_schedule": (), "junction_exit_m": INF, "junction_foes": (), "fidelity": "continuous",
+        "leader_gap_m": INF, "leader_speed_mps": 0.0, "pedestrians": (), "lights_ahead": (),
+        "junction_exit_m": INF, "junction_foes": (), "fidelity": "continuous",
     }
     base.update(scene)
     grid = np.zeros((1, GRID.rows, GRID.cols), np.float32) if occupancy is None else occupancy
@@ -41,8 +41,8 @@ def rules(**kwargs) -> set[str]:
 
 def light(state: str, distance_m: float, schedule=None, **kwargs) -> dict:
     """The next light on the route ``distance_m`` ahead, also the one ending the ego's lane."""
-    return dict(light=state, stop_distance_m=distance_m, next_light=state, next_light_m=distance_m,
-                light_schedule=schedule if schedule is not None else ((0.0, state),),
+    schedule = schedule if schedule is not None else ((0.0, state),)
+    return dict(light=state, stop_distance_m=distance_m, lights_ahead=((distance_m, state, schedule),),
                 junction_exit_m=distance_m + 20.0, **kwargs)
 
 
@@ -91,6 +91,22 @@ def test_red_light_slows_for_a_green_that_turns_red_before_the_ego_gets_there():
     turning = ((0.0, "G"), (2.0, "y"), (5.0, "r"), (25.0, "G"))
     assert act(**light("G", 80.0, turning), speed_mps=12.0) == SPEED_DOWN  # there in ~7 s: red
     assert act(**light("G", 15.0, turning), speed_mps=12.0) in (KEEP, SPEED_UP)  # there in 1.3 s: green
+
+
+def test_red_light_also_stops_for_a_light_beyond_the_next_one():
+    # in a junction at 8 m/s: the next light, 20 m ahead, stays green; the one after it, 50 m ahead,
+    # is red for a while: a behavior that may run 8 s must not take the ego past it
+    green = ((0.0, "G"), (40.0, "y"))
+    red = ((0.0, "r"), (30.0, "G"))
+    scene = dict(in_junction=True, stop_distance_m=20.0, junction_exit_m=5.0, speed_mps=8.0)
+    assert act(**scene, lights_ahead=((20.0, "G", green),)) in (KEEP, SPEED_UP)
+    assert act(**scene, lights_ahead=((20.0, "G", green), (50.0, "r", red))) == SPEED_DOWN
+
+
+def test_red_light_without_privileged_lights_reads_the_lane_light():
+    obs, info = situation(light="r", stop_distance_m=25.0, speed_mps=8.0)
+    del info["scene"]["lights_ahead"]
+    assert ExpertAgent().act(obs, info) == SPEED_DOWN
 
 
 def test_red_light_plans_stops_with_the_behaviors_the_fidelity_runs():
@@ -143,8 +159,13 @@ def test_yield_passes_a_foe_that_gives_way_or_is_held_by_its_light():
     assert act(**at_line, junction_foes=(waiting,)) == SPEED_UP
     held = foe(8.0, 15.0, 8.0, foe_signal="r")
     assert act(**at_line, junction_foes=(held,)) == SPEED_UP
-    # a waiting foe with the right of way may start at any time: the ego waits
+    # a waiting foe with the right of way may start at any time: the ego waits at the line ...
     assert act(**at_line, junction_foes=(foe(8.0, 6.0, 0.0, ego_yields=True),)) == KEEP
+    # ... but not inside the junction, where that foe waits for the ego to clear it
+    inside = dict(in_junction=True, stop_distance_m=60.0, junction_exit_m=8.0, speed_mps=0.0)
+    assert act(**inside, junction_foes=(foe(2.0, 6.0, 0.0, ego_yields=True),)) == SPEED_UP
+    # a standing foe without the right of way waits for the ego
+    assert act(**at_line, junction_foes=(foe(8.0, 6.0, 0.0),)) == SPEED_UP
 
 
 def test_yield_slows_before_the_junction_for_a_foe_arriving_with_the_ego():

@@ -111,13 +111,15 @@ def test_privileged_fields_in_a_real_episode(fidelity):
         for _ in range(400 if fidelity == "continuous" else 1500):
             scene = info["scene"]
             assert scene["fidelity"] == fidelity
-            if scene["next_light"]:
+            lights = scene["lights_ahead"]
+            if lights:
                 seen["light"] += 1
-                assert scene["light_schedule"][0] == (0.0, scene["next_light"])
-                assert all(a < b for (a, _), (b, _) in zip(scene["light_schedule"], scene["light_schedule"][1:]))
-                assert 0.0 <= scene["next_light_m"] < math.inf
-                if scene["light"]:  # the light ending the ego's lane is the next light on the route
-                    assert scene["next_light_m"] == pytest.approx(scene["stop_distance_m"])
+                assert [d for d, _, _ in lights] == sorted(d for d, _, _ in lights)
+                for d, state, schedule in lights:
+                    assert 0.0 <= d <= 150.0 and schedule[0] == (0.0, state)
+                    assert all(a < b for (a, _), (b, _) in zip(schedule, schedule[1:]))
+                if scene["light"]:  # the light ending the ego's lane is the first light on the route
+                    assert lights[0][:2] == (pytest.approx(scene["stop_distance_m"]), scene["light"])
             if not scene["in_junction"] and math.isfinite(scene["junction_exit_m"]):
                 assert scene["junction_exit_m"] >= scene["stop_distance_m"] - 0.5
             if math.isfinite(scene["leader_gap_m"]):
