@@ -157,9 +157,14 @@ class ExpertAgent:
         period = float(info.get("duration_s", 0.1))
         fidelity = scene.get("fidelity")
         continuous = fidelity == "continuous" if fidelity else period > 0.2
+        v = scene["speed_mps"]
         settled = (abs(scene.get("lane_error_m", INF)) < 0.15 and abs(scene.get("heading_error_rad", INF)) < 0.03
-                   and scene.get("curvature_ahead", INF) < 0.01 and not scene["in_junction"])
-        return Timing.for_period(period, continuous, settled)
+                   and scene.get("curvature_ahead", INF) < 0.01 and not scene["in_junction"]
+                   and scene.get("leader_gap_m", INF) > max(3.0 * v, 5.0) + 15.0)  # the planner brakes for a leader
+        # standing just past a junction with its rear still in it (on its crossing), the ego moves
+        # up rather than wait there for a behavior that surely ends in time
+        rear_in_junction = not scene["in_junction"] and scene.get("lane_pos_m", INF) - EGO_LENGTH_M < 1.0
+        return Timing.for_period(period, continuous, settled or (rear_in_junction and v < 0.5))
 
     @staticmethod
     def _time_to(distance_m: float, v: float, accel: float = 2.0, v_max: float = INF) -> float:
@@ -189,8 +194,9 @@ class ExpertAgent:
         return True
 
     def _stop_possible(self, v: float, distance_m: float, t: Timing) -> bool:
-        """Whether a chain of speed_down starting now stops before ``distance_m`` [m] (less the margin)."""
-        return v * v / (2.0 * t.stop_decel) <= distance_m - self.stop_margin_m
+        """Whether the ego stands, or a chain of speed_down starting now stops it before
+        ``distance_m`` [m] (less the margin)."""
+        return v < 0.5 or v * v / (2.0 * t.stop_decel) <= distance_m - self.stop_margin_m
 
     # ------------------------------------------------------------------ M_t
     def _corridor(self, occupancy: np.ndarray, lane_offset: int, half_width_m: float = 1.6) -> np.ndarray:
@@ -293,9 +299,13 @@ class ExpertAgent:
     def _rule_pedestrians(self, scene: dict, t: Timing) -> list[Target]:
         out = []
         for s, d, v_s, v_d in scene.get("pedestrians", ()):
+            if s < 0.5:
+                continue  # beside or behind the front bumper: driving on takes the ego away
             # the ego's half width and a margin: wider for a walking pedestrian than for one who
-            # stands (e.g. at the kerb, waiting to cross)
-            w = 0.9 + (1.0 if math.hypot(v_s, v_d) > 0.2 else 0.5)
+            # stands (e.g. at the kerb, waiting to cross), and in a bend, where the car's body
+            # sweeps inside its path (by curvature x wheelbase² / 2)
+            sweep = min(0.5 * scene.get("curvature_ahead", 0.0) * 2.9 ** 2, 1.0)
+            w = 0.9 + (1.0 if math.hypot(v_s, v_d) > 0.2 else 0.5) + sweep
             if abs(d) < w:
                 p_in = 0.0
                 p_out = (math.copysign(w, v_d) - d) / v_d if abs(v_d) > 0.2 else INF
@@ -306,6 +316,16 @@ class ExpertAgent:
             at = s - self.stop_margin_m
             out.append(Target(at, 0.0, "pedestrian", hard=True, from_s=p_in - 1.0, until_s=p_out + 1.0,
                               zone_m=self.stop_margin_m + EGO_LENGTH_M + 1.0))
+        # a pedestrian waiting at a crossing of the ego's path steps onto it when the signal lets
+        # them (walking at 1 to 1.5 m/s)
+        for c in scene.get("crossings", ()):
+            if (c["signal"] and c["signal"] in RED + YELLOW) or c["ego_dist_m"] < 0.5:
+                continue  # held by their signal, or the ego is on the crossing already: clear it
+            at = c["ego_dist_m"] - self.stop_margin_m
+            for gap in c["waiting_m"]:
+                out.append(Target(at, 0.0, "pedestrian", hard=True, from_s=max(gap - 2.5, 0.0) / 1.5 - 1.0,
+                                  until_s=(gap + 2.5) / 1.0 + 1.0,
+                                  zone_m=c["ego_exit_m"] - at + EGO_LENGTH_M))
         return out
 
     def _rule_route_lane(self, scene: dict, occupancy: np.ndarray, mask: np.ndarray, t: Timing,
@@ -363,6 +383,7 @@ class ExpertAgent:
         v_up = min(reference_speed(SPEED_UP, v, limit, self.behavior), v + t.accel * t.speed_up_s)
         if v_up > v + 0.05 and self._meets(targets, v, v_up, t.speed_up_s, t, tolerance=1.0):
             return SPEED_UP
-        if self._meets(targets, v, v, t.keep_s, t, tolerance=0.3):
+        creeping = 0.05 < v < 1.0  # a behavior at a crawl converges slowly: stop rather than creep
+        if not creeping and self._meets(targets, v, v, t.keep_s, t, tolerance=0.3):
             return KEEP
         return SPEED_DOWN

@@ -15,6 +15,11 @@ numpy) are listed in :func:`path_actors`; the world adds the ones it reads from 
   junction_foes    the vehicles on or before (up to ``FOE_RANGE_M``) the links that conflict with
                    the ego's link through the junction ahead (or the one it is in), see
                    :func:`junction_foes`
+  crossings        the pedestrian crossings the ego's link through the junction ahead (or the one
+                   it is in) passes over: one dict per crossing with ``ego_dist_m`` / ``ego_exit_m``
+                   (ego front to the start / end of the stretch of its path over the crossing [m]),
+                   ``signal`` (the pedestrians' signal char, "" without a light) and ``waiting_m``
+                   (distance [m] from each pedestrian waiting to step onto it to that stretch)
   fidelity         the world's fidelity (``event`` or ``continuous``)
   lane_error_m, heading_error_rad, curvature_ahead
                    continuous fidelity only: the ego's lateral offset [m] and heading error [rad]

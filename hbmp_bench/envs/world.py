@@ -17,7 +17,7 @@ from hbmp_bench.envs.drivers import FIDELITIES, LANE_CHANGE_CUTOFF_M, Continuous
 from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, followed_path, road_profile
 from hbmp_bench.envs.privileged import FOE_RANGE_M, LEADER_RANGE_M, LIGHTS_RANGE_M, junction_foes, path_actors
 from hbmp_bench.maps import net_path
-from hbmp_bench.maps.roadnet import RoadNetwork, project_on_polyline
+from hbmp_bench.maps.roadnet import RoadNetwork, point_along, project_on_polyline
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents, StopLine
 from hbmp_bench.metrics.geometry import LaneLocator, stop_line_of
 from hbmp_bench.metrics.records import EpisodeRecord, driving_score
@@ -467,30 +467,49 @@ class DrivingWorld:
         at = path.position(k, ego.lane_pos) if on_edge else path.junction_position(k, self._front(ego))
         return max(float(path.edge_start[k + 1]) - at, 0.0)
 
-    def _junction_foes(self, ego) -> tuple[dict, ...]:
-        """The vehicles on the links that conflict with the ego's next (or current) link through a
-        junction (:func:`hbmp_bench.envs.privileged.junction_foes`)."""
+    def _link_ahead(self, ego):
+        """The link the ego takes through the junction ahead (or the one it is in) from its
+        followed lane onto the route's next edge, and the distance from its front bumper to the
+        link's start [m] (negative inside); (None, nan) where there is none."""
         lane = self._followed_lane
         if lane not in self.net.lanes:
-            return ()
+            return None, float("nan")
         nxt = next(iter(self._next_edges(1)), None)
         link = next((c for c in self.net.connections[self.net.lane(lane).edge] if c.from_lane == lane and c.to_edge == nxt),
                     None)
-        shape = self.net.link_shape(link) if link is not None else ()
-        if len(shape) < 2:
-            return ()
+        if link is None or len(self.net.link_shape(link)) < 2:
+            return None, float("nan")
         followed = self.net.lane(lane)
         ends, direction = stop_line_of(followed.shape, followed.width)
         front = self._front(ego)
         entry = float((ends[0] - front) @ direction)
         if entry <= 0.0:
-            entry = -project_on_polyline(shape, front)[0]
+            entry = -project_on_polyline(self.net.link_shape(link), front)[0]
+        return link, entry
+
+    def _junction_foes(self, link, entry: float) -> tuple[dict, ...]:
+        """The vehicles on the links that conflict with the ego's ``link`` through a junction
+        (:func:`hbmp_bench.envs.privileged.junction_foes`)."""
         conflicts = self.net.link_conflicts(link)
         users = [tuple(u for u in self.sim.link_users(c.foe.from_lane, self.net.link_lanes(c.foe), FOE_RANGE_M)
                        if u[0] != EGO_ID) for c in conflicts]
         signals = [self.sim.light_state(c.foe.tls, c.foe.link_index) if c.foe.tls else "" for c in conflicts]
         signal = self.sim.light_state(link.tls, link.link_index) if link.tls else ""
         return junction_foes(entry, signal, link.state, conflicts, users, signals)
+
+    def _crossings(self, link, entry: float) -> tuple[dict, ...]:
+        """The pedestrian crossings the ego's ``link`` passes over: where, their pedestrian signal,
+        and how far the pedestrians waiting to step onto them are from the ego's path."""
+        shape, out = self.net.link_shape(link), []
+        actors = self._actors
+        for crossing, at, clear in self.net.link_crossings(link):
+            point = point_along(shape, 0.5 * (at + clear))
+            waiting = [float(np.hypot(*(actors.xy[actors.ids.index(p)] - point)))
+                       for p in self.sim.crossing_waiters(crossing.id, crossing.walkingareas) if p in actors.ids]
+            out.append({"ego_dist_m": entry + at, "ego_exit_m": entry + clear,
+                        "signal": self.sim.light_state(crossing.tls, crossing.link_index) if crossing.tls else "",
+                        "waiting_m": tuple(sorted(waiting))})
+        return tuple(out)
 
     def _privileged(self, ego, light: tuple[str, int, float, str] | None) -> dict:
         """The privileged fields of ``info["scene"]`` (see :mod:`hbmp_bench.envs.privileged`)."""
@@ -506,7 +525,9 @@ class DrivingWorld:
         out["lights_ahead"] = tuple((float(d), state, self.sim.signal_schedule(tls, index))
                                     for tls, index, d, state in lights if d <= LIGHTS_RANGE_M)
         out["junction_exit_m"] = self._junction_exit_m(ego)
-        out["junction_foes"] = self._junction_foes(ego)
+        link, entry = self._link_ahead(ego)
+        out["junction_foes"] = () if link is None else self._junction_foes(link, entry)
+        out["crossings"] = () if link is None else self._crossings(link, entry)
         out["fidelity"] = self.config.fidelity
         if self.config.fidelity == "continuous":
             out.update(self._lane_tracking(ego))

@@ -65,6 +65,20 @@ class LinkConflict:
     foe_clear_m: float
 
 
+@dataclass(frozen=True)
+class Crossing:
+    """A pedestrian crossing over the roads of a junction: its centreline (N, 2) [m] and width [m],
+    the walking areas at its two ends, and the traffic light link of its pedestrian signal
+    (``tls`` "" where it has none)."""
+
+    id: str
+    shape: np.ndarray
+    width: float
+    walkingareas: tuple[str, ...]
+    tls: str
+    link_index: int
+
+
 CONFLICT_WIDTH_M = 2.2
 """Two links conflict where their centrelines come closer than this [m] (two car widths' halves
 and a margin)."""
@@ -182,6 +196,17 @@ class RoadNetwork:
         self.edge_length = {e: self.lanes[ids[0]].length for e, ids in self.edge_lanes.items()}
         self.drivable_edges: tuple[str, ...] = tuple(sorted(self.edge_lanes))
         self.tls_ids: tuple[str, ...] = tuple(sorted(t.getID() for t in net.getTrafficLights()))
+        signals = _crossing_signals(self.path)
+        self.crossings: dict[str, Crossing] = {}
+        """Pedestrian crossings by edge id."""
+        for edge in net.getEdges(withInternal=True):
+            if edge.getFunction() != "crossing" or not edge.getLanes():
+                continue
+            lane = edge.getLanes()[0]
+            ends = tuple(e.getID() for e in (*edge.getIncoming(), *edge.getOutgoing()))
+            tls, index = signals.get(edge.getID(), ("", -1))
+            self.crossings[edge.getID()] = Crossing(edge.getID(), np.asarray(lane.getShape(), dtype=float)[:, :2],
+                                                    float(lane.getWidth()), ends, tls, index)
 
     def _final_edge(self, net, lane_id: str) -> str:
         """The normal edge a (possibly internal) lane leads onto."""
@@ -373,6 +398,24 @@ class RoadNetwork:
                     out.append(LinkConflict(foe, *zone, *foe_zone))
         return tuple(out)
 
+    @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
+    def link_crossings(self, link: Connection) -> tuple[tuple[Crossing, float, float], ...]:
+        """The pedestrian crossings of the junction that ``link`` passes over or beside: (crossing,
+        start, end [m] along the link's junction lanes of the stretch within half the crossing's
+        width and a car's half width and a margin of the crossing's centreline)."""
+        node = self.edge_from_to[link.from_edge][1]
+        shape = self.link_shape(link)
+        if len(shape) < 2:
+            return ()
+        out = []
+        for crossing in self.crossings.values():
+            if not crossing.id.startswith(f":{node}_"):
+                continue
+            zone = _close_stretch(shape, crossing.shape, width_m=crossing.width / 2 + 1.2)
+            if zone is not None:
+                out.append((crossing, *zone))
+        return tuple(out)
+
     def route_link(self, edge: str, to_edge: str, lane_id: str, allowed: frozenset[str] | None = None) -> Connection:
         """The link from ``edge`` onto ``to_edge`` that a car in ``lane_id`` (a lane of ``edge``) takes:
         its own lane's link where it has one (the one that keeps the lane index, if several), else
@@ -491,12 +534,26 @@ class RoutePath:
         return float(np.clip(at, lo, hi))
 
 
-def _close_stretch(shape: np.ndarray, other: np.ndarray, spacing: float = 0.5) -> tuple[float, float] | None:
-    """The first stretch (start, end) [m] along a polyline (N, 2) that lies within
-    ``CONFLICT_WIDTH_M`` of another (M, 2); None if none does."""
+def _crossing_signals(net_path: Path) -> dict[str, tuple[str, int]]:
+    """Crossing edge id -> (traffic light, link index) of its pedestrian signal, read off the net
+    file's connections onto crossings (sumolib skips them unless it reads every pedestrian link)."""
+    import xml.etree.ElementTree as ET
+
+    out = {}
+    for _, elem in ET.iterparse(str(net_path)):
+        if elem.tag == "connection" and elem.get("tl") and elem.get("to", "").startswith(":"):
+            out.setdefault(elem.get("to"), (elem.get("tl"), int(elem.get("linkIndex", -1))))
+        elem.clear()
+    return out
+
+
+def _close_stretch(shape: np.ndarray, other: np.ndarray, spacing: float = 0.5,
+                   width_m: float = CONFLICT_WIDTH_M) -> tuple[float, float] | None:
+    """The first stretch (start, end) [m] along a polyline (N, 2) that lies within ``width_m`` of
+    another (M, 2); None if none does."""
     s, points = _sample_polyline(shape, spacing)
     _, dist = _project_points(other, points)
-    close = np.flatnonzero(dist < CONFLICT_WIDTH_M)
+    close = np.flatnonzero(dist < width_m)
     if not len(close):
         return None
     run = close[: int(np.argmax(np.diff(np.append(close, close[-1] + 2)) > 1)) + 1]

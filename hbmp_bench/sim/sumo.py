@@ -372,6 +372,11 @@ class SumoSim:
                 out.append((vid, dist, libsumo.vehicle.getSpeed(vid)))
         return tuple(out)
 
+    def crossing_waiters(self, crossing: str, walkingareas: tuple[str, ...]) -> tuple[str, ...]:
+        """The pedestrians on the walking areas at a crossing's ends whose next edge is the crossing."""
+        return tuple(pid for area in walkingareas for pid in libsumo.edge.getLastStepPersonIDs(area)
+                     if libsumo.person.getNextEdge(pid) == crossing)
+
     # ---------------------------------------------------------------- commands
     def track_lane(self, vehicle_id: str) -> None:
         """Subscribe a vehicle to its lane variables too, so :meth:`vehicle_state` works for it
