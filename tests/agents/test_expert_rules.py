@@ -87,6 +87,11 @@ def test_red_light_stops_for_a_yellow_it_can_stop_for_and_goes_through_one_it_ca
     assert "red_light" not in rules(**light("y", 8.0, yellow), speed_mps=12.0)
 
 
+def test_red_light_waits_at_the_line_through_a_yellow_when_standing():
+    yellow = ((0.0, "y"), (3.0, "r"), (20.0, "G"))
+    assert act(**light("y", 0.6, yellow), speed_mps=0.0) == KEEP  # no "too close to stop" for a standing car
+
+
 def test_red_light_slows_for_a_green_that_turns_red_before_the_ego_gets_there():
     turning = ((0.0, "G"), (2.0, "y"), (5.0, "r"), (25.0, "G"))
     assert act(**light("G", 80.0, turning), speed_mps=12.0) == SPEED_DOWN  # there in ~7 s: red
@@ -190,6 +195,46 @@ def test_pedestrians_ignores_walkers_beside_the_path_and_waiting_at_the_kerb():
     for p in (along, kerb, leaving):
         assert "pedestrian" not in rules(pedestrians=(p,), speed_mps=8.0)
     assert act(pedestrians=(along, kerb, leaving), speed_mps=8.0) == SPEED_UP
+
+
+def test_pedestrians_waits_for_one_about_to_step_onto_a_crossing_of_its_path():
+    # turning over a crossing 8 m ahead; a pedestrian waits 3 m from the ego's path at its end
+    crossing = {"ego_dist_m": 8.0, "ego_exit_m": 12.0, "signal": "G", "waiting_m": (3.0,)}
+    at_line = dict(stop_distance_m=2.0, junction_exit_m=20.0, speed_mps=0.0)
+    assert act(**at_line, crossings=(crossing,)) == KEEP
+    assert "pedestrian" in rules(**at_line, crossings=(crossing,))
+    # their signal is red: they stay; nobody waits; the ego is over the crossing already
+    for other in ({**crossing, "signal": "r"}, {**crossing, "waiting_m": ()}, {**crossing, "ego_dist_m": -1.0}):
+        assert act(**at_line, crossings=(other,)) == SPEED_UP
+
+
+def test_pedestrians_beside_the_ego_do_not_stop_it():
+    beside = (-1.5, -1.2, 0.0, 1.3)  # next to the car, behind its front bumper
+    assert "pedestrian" not in rules(pedestrians=(beside,), speed_mps=3.0)
+
+
+# ------------------------------------------------------------------- chooser
+def test_the_expert_stops_rather_than_creeps():
+    # a crawl converges slowly (a behavior may run 8 s): not kept near a stop
+    assert act(**light("r", 6.0), speed_mps=0.4) == SPEED_DOWN
+    assert act(speed_mps=0.4) == SPEED_UP  # free road: drive off
+
+
+def test_the_longest_behavior_it_plans_with_depends_on_how_settled_it_is():
+    settled = dict(lane_error_m=0.05, heading_error_rad=0.01, curvature_ahead=0.0)
+    unsettled = dict(lane_error_m=0.4, heading_error_rad=0.01, curvature_ahead=0.0)
+    # 40 m before a red at 6 m/s: keeping may run 8 s (48 m) unless the planner is settled
+    assert act(**light("r", 40.0), speed_mps=6.0, **unsettled) == SPEED_DOWN
+    assert act(**light("r", 40.0), speed_mps=6.0, **settled) in (KEEP, SPEED_UP)
+    # a leader close ahead makes the planner brake and swerve: not settled
+    assert act(**light("r", 40.0), speed_mps=6.0, leader_gap_m=30.0, leader_speed_mps=6.0, **settled) == SPEED_DOWN
+
+
+def test_standing_with_its_rear_in_the_junction_behind_it_moves_up():
+    red_ahead = light("r", 14.0, ((0.0, "r"), (30.0, "G")))
+    unsettled = dict(lane_error_m=0.3, heading_error_rad=0.08, curvature_ahead=0.0)
+    assert act(**red_ahead, **unsettled, speed_mps=0.0, lane_pos_m=20.0) == KEEP
+    assert act(**red_ahead, **unsettled, speed_mps=0.0, lane_pos_m=3.0) == SPEED_UP
 
 
 # ------------------------------------------------------------------- route lane
