@@ -1,9 +1,10 @@
 """Privileged quantities of ``info["scene"]``: what the rule-based expert reads besides M_t and R_t.
 
 A learned agent sees only M_t and R_t; the expert (:mod:`hbmp_bench.agents.expert`), a
-demonstrator, may read the simulator's state. The fields this module measures (geometry only,
-numpy) are listed in :func:`path_actors`; the world adds the ones it reads from SUMO (see
-:meth:`hbmp_bench.envs.world.DrivingWorld` ``_observe``):
+demonstrator, may read the simulator's state. :class:`PrivilegedScene` adds these fields to the
+scene of :func:`hbmp_bench.envs.observation.road_profile`: those of :func:`path_actors` (geometry
+of the actors near the path), and
+
 
   lights_ahead     the traffic lights on the route within ``LIGHTS_RANGE_M``, nearest first (also
                    beyond junctions without lights, unlike R_t's l_g/l_y/l_r and ``light``): one
@@ -31,9 +32,15 @@ numpy) are listed in :func:`path_actors`; the world adds the ones it reads from 
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
+from hbmp_bench.envs.observation import followed_path
+from hbmp_bench.maps.roadnet import Connection, RoadNetwork, point_along, project_on_polyline
+from hbmp_bench.metrics.geometry import stop_line_of
 from hbmp_bench.planning.frame import Path
+from hbmp_bench.sim.sumo import Actors, LightAhead, SumoSim, VehicleState, VehicleType
 
 LEADER_RANGE_M = 100.0
 """Farthest leader reported, from the ego's front bumper [m]."""
@@ -139,3 +146,92 @@ def junction_foes(entry_m: float, signal: str, state: str, conflicts, users, foe
                 "foe_signal": foe_signal if dist > 0.0 else "",
             })
     return tuple(out)
+
+
+class PrivilegedScene:
+    """The privileged fields of one vehicle's scene in one world (the SUMO queries go through ``sim``).
+
+    Args:
+        net / sim: the world's network and simulation.
+        vehicle_id / vtype: the vehicle the scene is for and its type (footprint).
+        fidelity: the world's fidelity.
+        lane_path: the centreline the motion planner tracks for (lane, next edges) in continuous
+            fidelity (:meth:`hbmp_bench.envs.drivers.ModelDriver.lane_path`), None in event fidelity.
+    """
+
+    def __init__(self, net: RoadNetwork, sim: SumoSim, vehicle_id: str, vtype: VehicleType, fidelity: str,
+                 lane_path=None):
+        self.net, self.sim, self.vehicle_id, self.vtype = net, sim, vehicle_id, vtype
+        self.fidelity, self.lane_path = fidelity, lane_path
+        self._path = functools.lru_cache(maxsize=256)(
+            lambda lane, nxt: followed_path(net, lane, nxt, 10.0, LEADER_RANGE_M + 20.0))
+
+    def fields(self, ego: VehicleState, followed_lane: str, next_edges: tuple[str, ...], actors: Actors,
+               lights: tuple[LightAhead, ...], first_light: tuple[str, int, float, str] | None,
+               junction_exit_m: float) -> dict:
+        """The fields for the vehicle ``ego`` following ``followed_lane`` onto ``next_edges``, among
+        ``actors``; ``lights`` ahead on its route, the first replaced by ``first_light`` (the one
+        R_t reads); ``junction_exit_m`` measured by the world along its route."""
+        lane = followed_lane or ego.lane
+        out = path_actors(self._path(lane, tuple(next_edges[:3])), ego.xy, self.vtype.length, self.vtype.width,
+                          actors.xy, actors.yaw, actors.speed, actors.length, actors.width, actors.is_pedestrian)
+        ahead = [] if first_light is None else [first_light]
+        same = bool(lights) and first_light is not None and first_light[:2] == (lights[0].tls, lights[0].link_index)
+        ahead += [(far.tls, far.link_index, far.distance, far.state) for far in lights[1 if same else 0:]]
+        out["lights_ahead"] = tuple((float(d), state, self.sim.signal_schedule(tls, index))
+                                    for tls, index, d, state in ahead if d <= LIGHTS_RANGE_M)
+        out["junction_exit_m"] = junction_exit_m
+        link, entry = self._link_ahead(ego, followed_lane, next_edges)
+        out["junction_foes"] = () if link is None else self._junction_foes(link, entry)
+        out["crossings"] = () if link is None else self._crossings(link, entry, actors)
+        out["fidelity"] = self.fidelity
+        if self.lane_path is not None:
+            out.update(self._lane_tracking(ego, lane, next_edges))
+        return out
+
+    def _front(self, ego: VehicleState) -> np.ndarray:
+        return ego.xy + self.vtype.length / 2 * np.array([np.cos(ego.yaw), np.sin(ego.yaw)])
+
+    def _link_ahead(self, ego: VehicleState, followed_lane: str, next_edges: tuple[str, ...]) -> tuple[Connection | None, float]:
+        """The link from the followed lane onto the route's next edge (the junction ahead, or the
+        one the vehicle is in) and the distance from the front bumper to its start [m] (negative
+        inside); (None, nan) where there is none."""
+        if followed_lane not in self.net.lanes:
+            return None, float("nan")
+        lane = self.net.lane(followed_lane)
+        nxt = next_edges[0] if next_edges else None
+        link = next((c for c in self.net.connections[lane.edge] if c.from_lane == followed_lane and c.to_edge == nxt), None)
+        if link is None or len(self.net.link_shape(link)) < 2:
+            return None, float("nan")
+        ends, direction = stop_line_of(lane.shape, lane.width)
+        front = self._front(ego)
+        entry = float((ends[0] - front) @ direction)
+        if entry <= 0.0:
+            entry = -project_on_polyline(self.net.link_shape(link), front)[0]
+        return link, entry
+
+    def _junction_foes(self, link: Connection, entry: float) -> tuple[dict, ...]:
+        conflicts = self.net.link_conflicts(link)
+        users = [tuple(u for u in self.sim.link_users(c.foe.from_lane, self.net.link_lanes(c.foe), FOE_RANGE_M)
+                       if u[0] != self.vehicle_id) for c in conflicts]
+        signals = [self.sim.light_state(c.foe.tls, c.foe.link_index) if c.foe.tls else "" for c in conflicts]
+        signal = self.sim.light_state(link.tls, link.link_index) if link.tls else ""
+        return junction_foes(entry, signal, link.state, conflicts, users, signals)
+
+    def _crossings(self, link: Connection, entry: float, actors: Actors) -> tuple[dict, ...]:
+        shape, out = self.net.link_shape(link), []
+        for crossing, at, clear in self.net.link_crossings(link):
+            point = point_along(shape, 0.5 * (at + clear))
+            waiting = [float(np.hypot(*(actors.xy[actors.ids.index(p)] - point)))
+                       for p in self.sim.crossing_waiters(crossing.id, crossing.walkingareas) if p in actors.ids]
+            out.append({"ego_dist_m": entry + at, "ego_exit_m": entry + clear,
+                        "signal": self.sim.light_state(crossing.tls, crossing.link_index) if crossing.tls else "",
+                        "waiting_m": tuple(sorted(waiting))})
+        return tuple(out)
+
+    def _lane_tracking(self, ego: VehicleState, lane: str, next_edges: tuple[str, ...]) -> dict:
+        path = self.lane_path(lane, tuple(next_edges))
+        s, e, theta, _ = path.project(ego.xy, ego.yaw)
+        ahead = np.arange(s, s + max(3.0 * ego.speed, 5.0) + 10.0, 1.0)
+        return {"lane_error_m": float(e), "heading_error_rad": float(theta),
+                "curvature_ahead": float(np.max(np.abs(path.point_at(ahead)[3])))}

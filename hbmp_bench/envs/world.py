@@ -7,17 +7,16 @@ episode flow so that every shell shares one implementation.
 from __future__ import annotations
 
 import dataclasses
-import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from hbmp_bench import __version__
 from hbmp_bench.envs.drivers import FIDELITIES, LANE_CHANGE_CUTOFF_M, ContinuousConfig, ContinuousDriver, EventDriver, feasible_behaviors
-from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, followed_path, road_profile
-from hbmp_bench.envs.privileged import FOE_RANGE_M, LEADER_RANGE_M, LIGHTS_RANGE_M, junction_foes, path_actors
+from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, road_profile
+from hbmp_bench.envs.privileged import PrivilegedScene
 from hbmp_bench.maps import net_path
-from hbmp_bench.maps.roadnet import RoadNetwork, point_along, project_on_polyline
+from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents, StopLine
 from hbmp_bench.metrics.geometry import LaneLocator, stop_line_of
 from hbmp_bench.metrics.records import EpisodeRecord, driving_score
@@ -105,13 +104,14 @@ class DrivingWorld:
         self.net: RoadNetwork = road_network(town)
         self.locator = LaneLocator(self.net)
         self.observer = ObservationBuilder(self.net, config.observation)
-        self._scene_path = functools.lru_cache(maxsize=256)(
-            lambda lane, nxt: followed_path(self.net, lane, nxt, 10.0, LEADER_RANGE_M + 20.0))
         self.sim = SumoSim(net_path(town), step_length=config.step_length_s)
         if config.fidelity == "continuous":
             self.driver = ContinuousDriver(self.sim, self.net, EGO_ID, EGO_TYPE, config.continuous, config.behavior)
         else:
             self.driver = EventDriver(self.sim, self.net, EGO_ID, config.steps_per_decision, config.behavior)
+        self.privileged = PrivilegedScene(self.net, self.sim, EGO_ID, EGO_TYPE, config.fidelity,
+                                          getattr(self.driver, "lane_path", None))
+        """Builds the privileged fields of ``info["scene"]`` (:mod:`hbmp_bench.envs.privileged`)."""
         self.episode: Episode | None = None
         self.on_substep = None
         """Optional callable run after every simulation step (e.g. to render frames between decisions)."""
@@ -418,7 +418,8 @@ class DrivingWorld:
             actors.xy, actors.yaw, actors.length, actors.width,
         )
         scene["goal_distance_m"] = float(np.hypot(*(ego.xy - self.goal_xy)))
-        scene.update(self._privileged(ego, light))
+        scene.update(self.privileged.fields(ego, self._followed_lane, self._next_edges(), actors, self._lights, light,
+                                            self._junction_exit_m(ego)))
         info = {
             "action_mask": self.action_mask(),
             "events": {k: getattr(events, k) for k in EVENT_KINDS},
@@ -466,83 +467,6 @@ class DrivingWorld:
         on_edge = ego.lane in self.net.lanes and self.net.lanes[ego.lane].edge == self.route[k]
         at = path.position(k, ego.lane_pos) if on_edge else path.junction_position(k, self._front(ego))
         return max(float(path.edge_start[k + 1]) - at, 0.0)
-
-    def _link_ahead(self, ego):
-        """The link the ego takes through the junction ahead (or the one it is in) from its
-        followed lane onto the route's next edge, and the distance from its front bumper to the
-        link's start [m] (negative inside); (None, nan) where there is none."""
-        lane = self._followed_lane
-        if lane not in self.net.lanes:
-            return None, float("nan")
-        nxt = next(iter(self._next_edges(1)), None)
-        link = next((c for c in self.net.connections[self.net.lane(lane).edge] if c.from_lane == lane and c.to_edge == nxt),
-                    None)
-        if link is None or len(self.net.link_shape(link)) < 2:
-            return None, float("nan")
-        followed = self.net.lane(lane)
-        ends, direction = stop_line_of(followed.shape, followed.width)
-        front = self._front(ego)
-        entry = float((ends[0] - front) @ direction)
-        if entry <= 0.0:
-            entry = -project_on_polyline(self.net.link_shape(link), front)[0]
-        return link, entry
-
-    def _junction_foes(self, link, entry: float) -> tuple[dict, ...]:
-        """The vehicles on the links that conflict with the ego's ``link`` through a junction
-        (:func:`hbmp_bench.envs.privileged.junction_foes`)."""
-        conflicts = self.net.link_conflicts(link)
-        users = [tuple(u for u in self.sim.link_users(c.foe.from_lane, self.net.link_lanes(c.foe), FOE_RANGE_M)
-                       if u[0] != EGO_ID) for c in conflicts]
-        signals = [self.sim.light_state(c.foe.tls, c.foe.link_index) if c.foe.tls else "" for c in conflicts]
-        signal = self.sim.light_state(link.tls, link.link_index) if link.tls else ""
-        return junction_foes(entry, signal, link.state, conflicts, users, signals)
-
-    def _crossings(self, link, entry: float) -> tuple[dict, ...]:
-        """The pedestrian crossings the ego's ``link`` passes over: where, their pedestrian signal,
-        and how far the pedestrians waiting to step onto them are from the ego's path."""
-        shape, out = self.net.link_shape(link), []
-        actors = self._actors
-        for crossing, at, clear in self.net.link_crossings(link):
-            point = point_along(shape, 0.5 * (at + clear))
-            waiting = [float(np.hypot(*(actors.xy[actors.ids.index(p)] - point)))
-                       for p in self.sim.crossing_waiters(crossing.id, crossing.walkingareas) if p in actors.ids]
-            out.append({"ego_dist_m": entry + at, "ego_exit_m": entry + clear,
-                        "signal": self.sim.light_state(crossing.tls, crossing.link_index) if crossing.tls else "",
-                        "waiting_m": tuple(sorted(waiting))})
-        return tuple(out)
-
-    def _privileged(self, ego, light: tuple[str, int, float, str] | None) -> dict:
-        """The privileged fields of ``info["scene"]`` (see :mod:`hbmp_bench.envs.privileged`)."""
-        k = self._route_index()
-        actors = self._actors
-        path = self._scene_path(self._followed_lane or ego.lane, self.route[k + 1: k + 4])
-        out = path_actors(path, ego.xy, EGO_TYPE.length, EGO_TYPE.width, actors.xy, actors.yaw, actors.speed,
-                          actors.length, actors.width, actors.is_pedestrian)
-        lights = [] if light is None else [light]
-        sumo_first = bool(self._lights) and light is not None and light[:2] == (self._lights[0].tls, self._lights[0].link_index)
-        for far in self._lights[1 if sumo_first else 0:]:
-            lights.append((far.tls, far.link_index, far.distance, far.state))
-        out["lights_ahead"] = tuple((float(d), state, self.sim.signal_schedule(tls, index))
-                                    for tls, index, d, state in lights if d <= LIGHTS_RANGE_M)
-        out["junction_exit_m"] = self._junction_exit_m(ego)
-        link, entry = self._link_ahead(ego)
-        out["junction_foes"] = () if link is None else self._junction_foes(link, entry)
-        out["crossings"] = () if link is None else self._crossings(link, entry)
-        out["fidelity"] = self.config.fidelity
-        if self.config.fidelity == "continuous":
-            out.update(self._lane_tracking(ego))
-        return out
-
-    def _lane_tracking(self, ego) -> dict:
-        """How settled the motion planner is on the lane it follows: the ego's lateral offset [m] and
-        heading error [rad] from the centreline the planner tracks, and the sharpest curvature
-        [1/m] of that centreline over the next 3 s (at least 15 m). A behavior begun settled on a
-        straight lane converges in about its minimum duration; otherwise it may run much longer."""
-        path = self.driver.lane_path(self._followed_lane or ego.lane, self._next_edges())
-        s, e, theta, _ = path.project(ego.xy, ego.yaw)
-        ahead = np.arange(s, s + max(3.0 * ego.speed, 5.0) + 10.0, 1.0)
-        return {"lane_error_m": float(e), "heading_error_rad": float(theta),
-                "curvature_ahead": float(np.max(np.abs(path.point_at(ahead)[3])))}
 
     def scene_view(self, caption: str = ""):
         """What a top-down picture of this instant needs (:class:`hbmp_bench.render.SceneView`)."""
