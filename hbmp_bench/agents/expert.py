@@ -114,6 +114,8 @@ class Timing:
     hard_s: float
     stop_decel: float
     accel: float
+    crawl_s: float = 0.1
+    """How long a lane change begun below 2 m/s may run (slow to converge sideways) [s]."""
 
     @staticmethod
     def for_period(period_s: float, continuous: bool, settled: bool = False) -> "Timing":
@@ -121,9 +123,9 @@ class Timing:
         ``settled`` on a straight lane (small lane errors, no curve ahead, not in a junction)."""
         if continuous:
             return Timing(keep_s=1.5, speed_up_s=2.0, lane_change_s=3.0, hard_s=2.0 if settled else 8.0,
-                          stop_decel=3.0, accel=INF)
+                          stop_decel=3.0, accel=INF, crawl_s=8.0)
         p = max(period_s, 0.1)
-        return Timing(keep_s=p, speed_up_s=p, lane_change_s=p, hard_s=p, stop_decel=3.5, accel=2.6)
+        return Timing(keep_s=p, speed_up_s=p, lane_change_s=p, hard_s=p, stop_decel=3.5, accel=2.6, crawl_s=p)
 
 
 @register_agent("expert")
@@ -246,21 +248,24 @@ class ExpertAgent:
         lights = scene.get("lights_ahead")
         if lights is None:  # no privileged lights: the one ending the lane (R_t's)
             lights = ((scene["stop_distance_m"], scene["light"], ((0.0, scene["light"]),)),) if scene["light"] else ()
-        out = []
-        for d, light, schedule in lights:
-            if light not in RED + YELLOW + GREEN or not math.isfinite(d):
-                continue
-            if light not in RED and not self._stop_possible(scene["speed_mps"], d, t):
-                continue  # a yellow (or a green about to turn) it cannot stop for: go through
-            # do not reach the line from the end of green until it is green again (the light's
-            # schedule; without one: from now, until never)
-            stop_from = next((at for at, c in schedule if c not in GREEN), INF)
-            if stop_from == INF:
-                continue
-            green_again = next((at for at, c in schedule if at > stop_from and c in GREEN), INF)
-            out.append(Target(d - self.stop_margin_m, 0.0, "red_light", hard=True, from_s=max(stop_from - 0.5, 0.0),
-                              until_s=green_again + 0.5, zone_m=self.stop_margin_m))
-        return out
+        return [g for light in lights for g in self._light_target(light, scene["speed_mps"], t)]
+
+    def _light_target(self, light: tuple, v: float, t: Timing) -> list[Target]:
+        """The target of one light (distance to its stop line [m], signal, schedule): do not reach
+        the line from the end of its green until it is green again; nothing for a yellow (or a
+        green about to turn) the ego can no longer stop for."""
+        d, signal, schedule = light
+        if signal not in RED + YELLOW + GREEN or not math.isfinite(d):
+            return []
+        if signal not in RED and not self._stop_possible(v, d, t):
+            return []  # go through
+        schedule = schedule or ((0.0, signal),)
+        stop_from = next((at for at, c in schedule if c not in GREEN), INF)
+        if stop_from == INF:
+            return []
+        green_again = next((at for at, c in schedule if at > stop_from and c in GREEN), INF)
+        return [Target(d - self.stop_margin_m, 0.0, "red_light", hard=True, from_s=max(stop_from - 0.5, 0.0),
+                       until_s=green_again + 0.5, zone_m=self.stop_margin_m)]
 
     def _rule_leader_gap(self, scene: dict, occupancy: np.ndarray, t: Timing) -> list[Target]:
         gap = scene.get("leader_gap_m")
@@ -351,22 +356,34 @@ class ExpertAgent:
             if self._stuck_s > 5.0:
                 for side, action, alpha in ((1, CHANGE_LEFT, road[2]), (-1, CHANGE_RIGHT, road[4])):
                     if mask[action] and alpha > 0.5 and self._lane_free(occupancy, side, v) and \
-                            self._lane_change_safe(v, targets, t):
+                            self._lane_change_safe(scene, targets, t):
                         self._stuck_s = 0.0
                         return action, []
             return None, []
         action = CHANGE_LEFT if offset > 0 else CHANGE_RIGHT
-        if mask[action] and self._lane_free(occupancy, 1 if offset > 0 else -1, v) and self._lane_change_safe(v, targets, t):
+        if mask[action] and self._lane_free(occupancy, 1 if offset > 0 else -1, v) and self._lane_change_safe(scene, targets, t):
             return action, []
         if not mask[action] or road[3] > 0.5:
             return None, []
-        # wait for a gap where lane changes are still open (room for one at the lane-change speed)
+        # wait for a gap where lane changes are still open (room for one at the lane-change speed);
+        # past that point drive on: the route is re-planned from where the lane leads
         room = 16.0 if t.keep_s > 0.2 else 12.0
-        return None, [Target(d - room, 0.0, "route_lane", hard=True)]
+        return None, ([Target(d - room, 0.0, "route_lane", hard=True)] if d - room > 0.0 else [])
 
-    def _lane_change_safe(self, v: float, targets: list[Target], t: Timing) -> bool:
+    def _lane_change_safe(self, scene: dict, targets: list[Target], t: Timing) -> bool:
+        """Whether a lane change (at least ``min_lane_change_speed``, held for a whole behavior)
+        meets every target. The next stop line is judged with the signal of the lane it changes to
+        (``route_lane_light``); without it, as red."""
+        v = scene["speed_mps"]
         v_lc = max(v, self.behavior.min_lane_change_speed)
-        return self._meets(targets, v, v_lc, t.lane_change_s, t, tolerance=0.3)
+        lights = scene.get("lights_ahead") or (((scene["stop_distance_m"], scene["light"], ()),) if scene["light"] else ())
+        lines = [g for g in targets if g.rule != "red_light" or not lights or g.at_m > lights[0][0]]
+        if scene.get("route_lane_light"):  # the signal of the lane it changes to
+            lines += self._light_target(scene["route_lane_light"], v, t)
+        elif lights:  # unknown: counts as red
+            lines.append(Target(lights[0][0] - self.stop_margin_m, 0.0, "red_light", hard=True))
+        hold = t.lane_change_s if v >= 2.0 else max(t.lane_change_s, t.crawl_s)
+        return self._meets(lines, v, v_lc, hold, t, tolerance=0.3)
 
     # ---------------------------------------------------------------- act
     def targets(self, observation: dict, info: dict) -> list[Target]:

@@ -11,6 +11,9 @@ of the actors near the path), and
                    (distance from the front bumper to the stop line [m], signal char, schedule) per
                    light, the schedule ((0, char now), (seconds until the next change, char), ...)
                    of its link for the next minute
+  route_lane_light the light of the link onto the route's next edge from the lane that continues the
+                   route, where the ego is in another lane: (distance [m], signal char, schedule)
+                   as in ``lights_ahead``, () otherwise (a lane change may lead to another signal)
   junction_exit_m  distance from the front bumper to the end of the junction the route crosses
                    next (or is crossing) [m]; inf after the last junction
   junction_foes    the vehicles on or before (up to ``FOE_RANGE_M``) the links that conflict with
@@ -40,7 +43,7 @@ from hbmp_bench.envs.observation import followed_path
 from hbmp_bench.maps.roadnet import Connection, RoadNetwork, point_along, project_on_polyline
 from hbmp_bench.metrics.geometry import stop_line_of
 from hbmp_bench.planning.frame import Path
-from hbmp_bench.sim.sumo import Actors, LightAhead, SumoSim, VehicleState, VehicleType
+from hbmp_bench.sim.sumo import Actors, SumoSim, VehicleState, VehicleType
 
 LEADER_RANGE_M = 100.0
 """Farthest leader reported, from the ego's front bumper [m]."""
@@ -167,19 +170,15 @@ class PrivilegedScene:
             lambda lane, nxt: followed_path(net, lane, nxt, 10.0, LEADER_RANGE_M + 20.0))
 
     def fields(self, ego: VehicleState, followed_lane: str, next_edges: tuple[str, ...], actors: Actors,
-               lights: tuple[LightAhead, ...], first_light: tuple[str, int, float, str] | None,
-               junction_exit_m: float) -> dict:
+               lights: list[tuple[str, int, float, str]], junction_exit_m: float) -> dict:
         """The fields for the vehicle ``ego`` following ``followed_lane`` onto ``next_edges``, among
-        ``actors``; ``lights`` ahead on its route, the first replaced by ``first_light`` (the one
-        R_t reads); ``junction_exit_m`` measured by the world along its route."""
+        ``actors``; the world measures along its route the ``lights`` ahead (tls, link index,
+        distance [m], signal) and ``junction_exit_m``."""
         lane = followed_lane or ego.lane
         out = path_actors(self._path(lane, tuple(next_edges[:3])), ego.xy, self.vtype.length, self.vtype.width,
                           actors.xy, actors.yaw, actors.speed, actors.length, actors.width, actors.is_pedestrian)
-        ahead = [] if first_light is None else [first_light]
-        same = bool(lights) and first_light is not None and first_light[:2] == (lights[0].tls, lights[0].link_index)
-        ahead += [(far.tls, far.link_index, far.distance, far.state) for far in lights[1 if same else 0:]]
         out["lights_ahead"] = tuple((float(d), state, self.sim.signal_schedule(tls, index))
-                                    for tls, index, d, state in ahead if d <= LIGHTS_RANGE_M)
+                                    for tls, index, d, state in lights if d <= LIGHTS_RANGE_M)
         out["junction_exit_m"] = junction_exit_m
         link, entry = self._link_ahead(ego, followed_lane, next_edges)
         out["junction_foes"] = () if link is None else self._junction_foes(link, entry)

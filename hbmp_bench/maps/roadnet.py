@@ -306,12 +306,13 @@ class RoadNetwork:
         """Per edge of ``route``, the lanes from which the car can drive on to ``goal_lane`` (on the
         last edge: the goal lane itself).
 
-        A lane change needs ``room_m`` [m] of an edge: its length less the last ``cutoff_m`` [m]
-        before the junction where lane changes are closed, or on the goal edge the goal's position
-        ``goal_pos`` [m] (None: the goal edge's room like any edge's). Before an edge with that
-        room these are the lanes that link onto it at all; before an edge without (a short goal
-        edge, a roundabout's ring segment) the car must already be in a lane whose link lands on
-        one of that edge's good lanes. Where no lane does, any linking lane is kept.
+        Each lane change needs ``room_m`` [m] of an edge's room: its length less the last
+        ``cutoff_m`` [m] before the junction where lane changes are closed, or on the goal edge the
+        goal's position ``goal_pos`` [m] (None: the goal edge's room like any edge's). These are the
+        lanes whose link onto the next edge lands within as many lane changes of that edge's good
+        lanes as its room allows: before a long edge every linking lane; before one without room
+        (a short goal edge, a roundabout's ring segment) only a lane whose link lands on a good
+        lane. Where no lane does, the links landing fewest lane changes away are kept.
         """
         return self._route_lanes(tuple(route), goal_lane, goal_pos, float(room_m), float(cutoff_m))
 
@@ -324,10 +325,11 @@ class RoadNetwork:
             last = k + 1 == len(route) - 1
             room = goal_pos if last and goal_pos is not None else self.edge_length[to_edge] - cutoff_m
             links = self.links(edge, to_edge)
-            lanes = frozenset(c.from_lane for c in links)
-            if room < room_m:
-                lanes = frozenset(c.from_lane for c in links if c.to_lane in good[-1]) or lanes
-            good.append(lanes)
+            targets = [self.lanes[g].index for g in good[-1]]
+            changes = {c: min((abs(self.lanes[c.to_lane].index - g) for g in targets), default=0) for c in links}
+            allowed = max(int(room // room_m), 0)
+            fewest = min(changes.values(), default=0)
+            good.append(frozenset(c.from_lane for c, n in changes.items() if n <= max(allowed, fewest)))
         return tuple(reversed(good))
 
     def neighbour_lane(self, lane_id: str, side: int) -> str | None:

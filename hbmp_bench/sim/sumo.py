@@ -318,13 +318,11 @@ class SumoSim:
 
     def light_ahead(self, vehicle_id: str) -> LightAhead | None:
         """The next traffic light on the vehicle's route, or None."""
-        lights = self.lights_ahead(vehicle_id)
-        return lights[0] if lights else None
-
-    def lights_ahead(self, vehicle_id: str) -> tuple[LightAhead, ...]:
-        """Every traffic light on the rest of the vehicle's route, nearest first."""
-        return tuple(LightAhead(tls, int(link_index), float(distance), state)
-                     for tls, link_index, distance, state in libsumo.vehicle.getNextTLS(vehicle_id))
+        lights = libsumo.vehicle.getNextTLS(vehicle_id)
+        if not lights:
+            return None
+        tls, link_index, distance, state = lights[0]
+        return LightAhead(tls, int(link_index), float(distance), state)
 
     def light_state(self, tls: str, link_index: int) -> str:
         """Current signal char (``r``, ``y``, ``g``, ``G`` ...) of one link of a traffic light."""

@@ -121,3 +121,16 @@ def test_route_lanes_reach_a_goal_lane_that_leaves_no_room_to_change():
     # the lanes a car drives (and so the route length) follow the same rule
     path = net.route_path(route, "-X230_235_Pr235_2", "-I45_235_X90_235_1", 10.85)
     assert "-X90_235_AN_1" in path.lanes and "-X90_235_AN_2" not in path.lanes
+
+
+def test_route_lanes_leave_room_for_every_lane_change_before_the_goal():
+    """Town05: a goal in the rightmost of three lanes 33 m into its edge leaves room for one lane
+    change there (20 m each), not two: the edge before must be left by a lane landing at most
+    one lane away from the goal lane."""
+    net = road_network("Town05")
+    route = ("C4R1_C4R2", "-C3R2_C4R2", "-C2R2_C3R2", "-C1R2_C2R2")
+    good = net.route_lanes(route, "-C1R2_C2R2_1", goal_pos=33.22)
+    assert good[-1] == {"-C1R2_C2R2_1"}
+    assert good[-2] == {"-C2R2_C3R2_1", "-C2R2_C3R2_2"}
+    assert good[-3] == set(net.lanes_to(route[1], route[2]))  # a long edge: room for any change
+    assert net.route_lanes(route, "-C1R2_C2R2_1", goal_pos=60.0)[-2] == set(net.lanes_to(route[2], route[3]))
