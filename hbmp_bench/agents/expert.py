@@ -196,9 +196,9 @@ class ExpertAgent:
     def _meets(targets: list[Target], v: float, v_to: float, hold_s: float, t: Timing, tolerance: float) -> bool:
         """Whether a behavior that takes the speed from ``v`` to ``v_to`` and holds it for
         ``hold_s`` [s] (``t.hard_s`` for hard targets) still lets a chain of speed_down meet
-        every target."""
+        every target; a speed cap may be exceeded by ``tolerance`` [m/s], a stop never."""
         for g in targets:
-            if v_to <= g.speed_mps + tolerance or g.passes_outside(v, v_to):
+            if v_to <= g.speed_mps + (tolerance if g.speed_mps > 0.0 else 0.0) or g.passes_outside(v, v_to):
                 continue
             travel = max(v, v_to) * (max(hold_s, t.hard_s) if g.hard else hold_s)
             if g.at_m <= 0.0 or travel + (v_to ** 2 - g.speed_mps ** 2) / (2.0 * t.stop_decel) > g.at_m:
@@ -408,7 +408,7 @@ class ExpertAgent:
         v_up = min(reference_speed(SPEED_UP, v, limit, self.behavior), v + t.accel * t.speed_up_s)
         if v_up > v + 0.05 and self._meets(targets, v, v_up, t.speed_up_s, t, tolerance=1.0):
             return SPEED_UP
-        creeping = 0.05 < v < 1.0  # a behavior at a crawl converges slowly: stop rather than creep
+        creeping = 0.05 < v < 1.0 and t.crawl_s > 1.0  # the planner converges slowly at a crawl: stop instead
         if not creeping and self._meets(targets, v, v, t.keep_s, t, tolerance=0.3):
             return KEEP
         return SPEED_DOWN
