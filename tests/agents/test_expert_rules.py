@@ -281,3 +281,30 @@ def test_the_planned_stop_is_longer_than_the_measured_speed_down_chain(fidelity)
     timing = Timing.for_period(1.0 if fidelity == "continuous" else 0.1, fidelity == "continuous")
     planned = trace.v_start ** 2 / (2.0 * timing.stop_decel)
     assert trace.distance_m <= planned <= 1.35 * trace.distance_m
+
+
+# ------------------------------------------------------------ real episodes
+@pytest.mark.slow
+@pytest.mark.parametrize("town, task, episode, fidelity", [
+    ("Town01", "NavigationDynamic", 0, "continuous"),   # lights, traffic, pedestrians
+    ("Town01", "NavigationDynamic", 0, "event"),        # a permissive left turn across oncoming traffic
+    ("Town05", "OneTurn", 0, "event"),                  # waits at the line through a red, no creeping
+    ("Town05", "OneTurn", 1, "continuous"),             # two lane changes in time for the goal lane
+])
+def test_the_expert_drives_real_episodes_lawfully(town, task, episode, fidelity):
+    from hbmp_bench.envs import BehaviorEnv
+
+    env = BehaviorEnv(town=town, task=task, suite="hbmp", fidelity=fidelity)
+    agent = ExpertAgent()
+    try:
+        obs, info = env.reset(seed=episode, options={"episode_index": episode})
+        agent.reset(info)
+        for _ in range(5000):
+            obs, _, terminated, truncated, info = env.step(agent.act(obs, info))
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    record = info["episode"]
+    assert record["end_reason"] == "goal", record
+    assert record["red_light"] == record["collision_vehicle"] == record["collision_pedestrian"] == 0
