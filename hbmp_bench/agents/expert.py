@@ -383,7 +383,7 @@ class ExpertAgent:
         elif lights:  # unknown: counts as red
             lines.append(Target(lights[0][0] - self.stop_margin_m, 0.0, "red_light", hard=True))
         hold = t.lane_change_s if v >= 2.0 else max(t.lane_change_s, t.crawl_s)
-        return self._meets(lines, v, v_lc, hold, t, tolerance=0.3)
+        return self._meets(lines, v, v_lc, hold, t, tolerance=1.0)
 
     # ---------------------------------------------------------------- act
     def targets(self, observation: dict, info: dict) -> list[Target]:

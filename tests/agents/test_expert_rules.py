@@ -7,7 +7,7 @@ The crafted situations are ``(observation, info)`` pairs as the world builds the
 import numpy as np
 import pytest
 
-from hbmp_bench.agents.expert import CHANGE_LEFT, KEEP, SPEED_DOWN, SPEED_UP, ExpertAgent, Timing
+from hbmp_bench.agents.expert import CHANGE_LEFT, CHANGE_RIGHT, KEEP, SPEED_DOWN, SPEED_UP, ExpertAgent, Timing
 from hbmp_bench.envs.observation import ObservationConfig
 
 GRID = ObservationConfig()
@@ -308,3 +308,8 @@ def test_the_expert_drives_real_episodes_lawfully(town, task, episode, fidelity)
     record = info["episode"]
     assert record["end_reason"] == "goal", record
     assert record["red_light"] == record["collision_vehicle"] == record["collision_pedestrian"] == 0
+
+
+def test_route_lane_changes_while_cruising_a_little_above_the_cruise_speed():
+    # event fidelity: speed_up steps overshoot the cruise speed (12.5 m/s) by a few tenths
+    assert act(route_lane_offset=-1, speed_mps=13.3, fidelity="event", duration_s=0.1) == CHANGE_RIGHT
