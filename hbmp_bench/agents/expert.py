@@ -81,13 +81,14 @@ class Target:
     until_s: float = INF
     zone_m: float = 0.0
 
-    def passes_outside(self, v: float, v_to: float) -> bool:
+    def passes_outside(self, v: float, v_to: float, v_then: float = 0.0) -> bool:
         """Whether a car at ``v`` [m/s] that goes to ``v_to`` and holds it misses the window: it
-        leaves the zone before it (reaching ``v_to`` gently, at 1.5 m/s²) or gets there after it
+        leaves the zone before it (accelerating gently, at 1.5 m/s², to ``v_to`` or to ``v_then``
+        where the next decisions come soon enough to speed up further) or gets there after it
         (at ``v_to`` at once)."""
         if self.from_s <= 0.0 and self.until_s == INF:
             return False
-        leave_s = ExpertAgent._time_to(self.at_m + self.zone_m, v, accel=1.5, v_max=v_to)
+        leave_s = ExpertAgent._time_to(self.at_m + self.zone_m, v, accel=1.5, v_max=max(v_to, v_then))
         enter_s = max(self.at_m, 0.0) / max(v, v_to, 0.1)
         return leave_s < self.from_s or enter_s > self.until_s
 
@@ -197,8 +198,9 @@ class ExpertAgent:
         """Whether a behavior that takes the speed from ``v`` to ``v_to`` and holds it for
         ``hold_s`` [s] (``t.hard_s`` for hard targets) still lets a chain of speed_down meet
         every target; a speed cap may be exceeded by ``tolerance`` [m/s], a stop never."""
+        v_then = 0.0 if t.hard_s > 1.0 else 8.0  # decisions every 0.1 s keep speeding up
         for g in targets:
-            if v_to <= g.speed_mps + (tolerance if g.speed_mps > 0.0 else 0.0) or g.passes_outside(v, v_to):
+            if v_to <= g.speed_mps + (tolerance if g.speed_mps > 0.0 else 0.0) or g.passes_outside(v, v_to, v_then):
                 continue
             travel = max(v, v_to) * (max(hold_s, t.hard_s) if g.hard else hold_s)
             if g.at_m <= 0.0 or travel + (v_to ** 2 - g.speed_mps ** 2) / (2.0 * t.stop_decel) > g.at_m:

@@ -120,6 +120,10 @@ def test_red_light_plans_stops_with_the_behaviors_the_fidelity_runs():
     assert act(**light("r", 25.0), speed_mps=8.0) == SPEED_DOWN
     assert act(**light("r", 25.0), speed_mps=8.0, fidelity="event", duration_s=0.1) != SPEED_DOWN
     assert act(**light("r", 10.0), speed_mps=8.0, fidelity="event", duration_s=0.1) == SPEED_DOWN
+    # standing 2 m before the line of a green light with yellow in 6 s: drive off (speeding up
+    # 0.26 m/s per decision, it is well past the line by then)
+    green = ((0.0, "G"), (6.0, "y"), (9.0, "r"))
+    assert act(**light("G", 2.0, green), speed_mps=0.0, fidelity="event", duration_s=0.1) == SPEED_UP
     # at a crawl at the line: no creeping over it 0.26 m/s at a time
     assert act(**light("r", 1.5), speed_mps=0.33, fidelity="event", duration_s=0.1) == SPEED_DOWN
     assert act(**light("r", 1.5), speed_mps=0.0, fidelity="event", duration_s=0.1) == KEEP
