@@ -157,9 +157,11 @@ class ModelDriver:
 
     def advance(self, control: Control) -> None:
         """One control period of the bicycle model; the new pose goes into SUMO (``off_map`` when
-        SUMO cannot place it)."""
+        SUMO cannot place it), and its speed too: SUMO's drivers judge gaps and the right of way
+        at junctions by the vehicle's speed, and a pushed pose alone reads as standing still."""
         self.model = bicycle_step(self.model, control, self.config.executor.dt, self.config.vehicle)
         self.off_map = not self.sim.move_to_xy(self.vehicle_id, self.model.xy, self.model.yaw)
+        self.sim.set_speed(self.vehicle_id, self.model.v)
 
     def observe(self, state: VehicleState) -> VehicleState:
         """SUMO's lane bookkeeping with the model's exact pose and speed."""

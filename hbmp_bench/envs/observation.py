@@ -196,6 +196,7 @@ def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[s
         "in_junction": in_junction,
         "route_lane_offset": 0,
         "stop_distance_m": float("inf"),
+        "lane_pos_m": 0.0,
         "light": "",
     }
     scene["turn_ahead"] = ""
@@ -218,6 +219,7 @@ def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[s
         remaining = max(lane.length - lane_pos, 0.0)
         r[8] = np.clip(remaining / max(lane.length, 1e-6), 0.0, 1.0)
         scene["stop_distance_m"] = remaining
+        scene["lane_pos_m"] = float(lane_pos)
         if light is not None and light[2] <= remaining + 1.0:
             state = light[3]
             r[5], r[6], r[7] = state in GREEN, state in YELLOW, state in RED

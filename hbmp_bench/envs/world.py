@@ -14,10 +14,11 @@ import numpy as np
 from hbmp_bench import __version__
 from hbmp_bench.envs.drivers import FIDELITIES, LANE_CHANGE_CUTOFF_M, ContinuousConfig, ContinuousDriver, EventDriver, feasible_behaviors
 from hbmp_bench.envs.observation import ObservationBuilder, ObservationConfig, road_profile
+from hbmp_bench.envs.privileged import LIGHTS_RANGE_M, PrivilegedScene
 from hbmp_bench.maps import net_path
 from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents, StopLine
-from hbmp_bench.metrics.geometry import LaneLocator
+from hbmp_bench.metrics.geometry import LaneLocator, stop_line_of
 from hbmp_bench.metrics.records import EpisodeRecord, driving_score
 from hbmp_bench.planning.behaviors import BehaviorConfig
 from hbmp_bench.scenarios import Episode, road_network
@@ -108,6 +109,9 @@ class DrivingWorld:
             self.driver = ContinuousDriver(self.sim, self.net, EGO_ID, EGO_TYPE, config.continuous, config.behavior)
         else:
             self.driver = EventDriver(self.sim, self.net, EGO_ID, config.steps_per_decision, config.behavior)
+        self.privileged = PrivilegedScene(self.net, self.sim, EGO_ID, EGO_TYPE, config.fidelity,
+                                          getattr(self.driver, "lane_path", None))
+        """Builds the privileged fields of ``info["scene"]`` (:mod:`hbmp_bench.envs.privileged`)."""
         self.episode: Episode | None = None
         self.on_substep = None
         """Optional callable run after every simulation step (e.g. to render frames between decisions)."""
@@ -120,7 +124,6 @@ class DrivingWorld:
         self.done_reason = ""
         self._last_xy: np.ndarray | None = None
         self._ego = None
-        self._light = None
         self._actors = None
         self._followed_lane = ""
 
@@ -161,7 +164,6 @@ class DrivingWorld:
         self.detector = InfractionDetector(self.locator, self.goal_xy, episode.success_radius_m, episode.timeout_s)
         self._set_route(episode.route)
         self.reroutes = 0
-        self._light = self.sim.light_ahead(EGO_ID)
         self._actors = self.sim.snapshot().without(EGO_ID)
         return self._observe(StepEvents())
 
@@ -316,7 +318,6 @@ class DrivingWorld:
         self.distance_m += float(np.hypot(*(state.xy - self._last_xy)))
         self._last_xy = state.xy
         self._update_progress(state)
-        self._light = self.sim.light_ahead(EGO_ID)
         actors = snapshot.without(EGO_ID)
         lane = self._followed_lane
         ev = self.detector.update(
@@ -405,15 +406,19 @@ class DrivingWorld:
     def _observe(self, events: StepEvents) -> tuple[dict, dict]:
         ego, ep = self._ego, self.episode
         route_index = self._route_index()
-        light = None if self._light is None else (self._light.tls, self._light.link_index, self._light.distance, self._light.state)
-        road, scene = road_profile(self.net, ego.lane, ego.lane_pos, self.route, route_index, ep.goal_lane, ego.speed, light,
-                                   ep.goal_pos)
+        lights = self._route_lights(ego)
+        lane, lane_pos = self._profile_lane(ego)
+        road, scene = road_profile(self.net, lane, lane_pos, self.route, route_index, ep.goal_lane, ego.speed,
+                                   lights[0] if lights else None, ep.goal_pos)
         actors = self._actors
         occupancy = self.observer.occupancy(
             ego.xy, ego.yaw, self._followed_lane or ego.lane, self.route[route_index + 1: route_index + 4],
             actors.xy, actors.yaw, actors.length, actors.width,
         )
         scene["goal_distance_m"] = float(np.hypot(*(ego.xy - self.goal_xy)))
+        scene.update(self.privileged.fields(ego, self._followed_lane, self._next_edges(), actors, lights,
+                                            self._junction_exit_m(ego)))
+        scene["route_lane_light"] = self._route_lane_light(ego, lane, scene["route_lane_offset"])
         info = {
             "action_mask": self.action_mask(),
             "events": {k: getattr(events, k) for k in EVENT_KINDS},
@@ -424,6 +429,97 @@ class DrivingWorld:
             "scene": scene,
         }
         return {"occupancy": occupancy, "road": road}, info
+
+    def _front(self, ego) -> np.ndarray:
+        """The ego's front bumper (2,) [m]."""
+        return ego.xy + EGO_TYPE.length / 2 * np.array([np.cos(ego.yaw), np.sin(ego.yaw)])
+
+    def _profile_lane(self, ego) -> tuple[str, float]:
+        """The lane R_t is read on and the front bumper's position on it [m].
+
+        SUMO's lane as a rule; but a pose pushed with ``moveToXY`` next to the end of a lane may be
+        matched onto a junction lane while the front bumper has not reached the stop line yet:
+        then the followed lane."""
+        lane = self._followed_lane
+        if ego.lane in self.net.lanes or lane not in self.net.lanes:
+            return ego.lane, ego.lane_pos
+        ahead = self._to_stop_line(ego, lane)
+        if ahead <= 0.0:
+            return ego.lane, ego.lane_pos
+        return lane, max(self.net.lane(lane).length - ahead, 0.0)
+
+    def _to_stop_line(self, ego, lane: str) -> float:
+        """Signed distance [m] from the front bumper to the end of the normal ``lane`` (negative past it)."""
+        ends, direction = stop_line_of(self.net.lane(lane).shape, self.net.lane(lane).width)
+        return float((ends[0] - self._front(ego)) @ direction)
+
+    def _route_position(self, ego) -> tuple[int | None, float]:
+        """(index in the route of the followed lane's edge, distance of the front bumper from the
+        route's start along its lanes [m]); (None, nan) off the route."""
+        k = self._route_pos.get(self.net.lane(self._followed_lane).edge) if self._followed_lane else None
+        if k is None:
+            return None, float("nan")
+        on_edge = ego.lane in self.net.lanes and self.net.lanes[ego.lane].edge == self.route[k]
+        path = self._route_path
+        if on_edge or k + 1 >= len(self.route):
+            return k, path.position(k, ego.lane_pos)
+        return k, path.junction_position(k, self._front(ego))
+
+    def _junction_exit_m(self, ego) -> float:
+        """Distance from the front bumper to the end of the junction the route crosses next, or is
+        crossing, along the route's lanes [m] (inf after the last one)."""
+        k, at = self._route_position(ego)
+        if k is None or k + 1 >= len(self.route):
+            return float("inf")
+        return max(float(self._route_path.edge_start[k + 1]) - at, 0.0)
+
+    def _route_lane_light(self, ego, lane: str, offset: int) -> tuple:
+        """Privileged: the light of the link from the lane ``offset`` lanes beside ``lane`` (the one
+        that continues the route) onto the route's next edge, as (distance to the stop line [m],
+        signal, schedule); () where that lane is ``lane`` itself or its link has no light."""
+        if not offset or lane not in self.net.lanes:
+            return ()
+        ids = self.net.edge_lanes[self.net.lane(lane).edge]
+        here = ids.index(lane)
+        if not 0 <= here + offset < len(ids):
+            return ()
+        nxt = next(iter(self._next_edges(1)), None)
+        fixed = self.locator.stop_line(ids[here + offset], nxt)
+        if fixed is None:
+            return ()
+        tls, index = fixed[2], fixed[3]
+        return (self._to_stop_line(ego, lane), self.sim.light_state(tls, index), self.sim.signal_schedule(tls, index))
+
+    def _route_lights(self, ego) -> list[tuple[str, int, float, str]]:
+        """The traffic lights ahead along the route the ego follows, nearest first, up to
+        ``LIGHTS_RANGE_M``: (tls, link index, distance from the front bumper to the stop line [m],
+        signal). At the end of the followed lane, its link's (the one the detectors judge);
+        beyond, those of the links the route takes. SUMO's own next lights (``getNextTLS``) follow
+        SUMO's map matching of a pushed pose, which may jump to another visit of a junction."""
+        k, at = self._route_position(ego)
+        lane = self._followed_lane
+        if k is None or lane not in self.net.lanes:
+            return []
+        out = []
+        nxt = self.route[k + 1] if k + 1 < len(self.route) else None
+        fixed = self.locator.stop_line(lane, nxt)
+        ahead = self._to_stop_line(ego, lane)
+        if fixed is not None and ahead > 0.0:
+            out.append((fixed[2], fixed[3], ahead, self.sim.light_state(fixed[2], fixed[3])))
+        if nxt is None:
+            return out
+        own = next((c for c in self.net.connections[self.net.lane(lane).edge] if c.from_lane == lane and c.to_edge == nxt),
+                   None)
+        to_lane = (own or self.net.route_link(self.route[k], nxt, lane)).to_lane
+        for j in range(k + 1, len(self.route) - 1):
+            distance = float(self._route_path.edge_end[j]) - at
+            if distance > LIGHTS_RANGE_M:
+                break
+            link = self.net.route_link(self.route[j], self.route[j + 1], to_lane)
+            if link.tls:
+                out.append((link.tls, link.link_index, distance, self.sim.light_state(link.tls, link.link_index)))
+            to_lane = link.to_lane
+        return out
 
     def scene_view(self, caption: str = ""):
         """What a top-down picture of this instant needs (:class:`hbmp_bench.render.SceneView`)."""

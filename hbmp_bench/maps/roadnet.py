@@ -34,7 +34,9 @@ class Connection:
 
     ``via`` is the first internal (junction) lane the link runs over, ``""`` if none;
     ``direction`` is SUMO's link direction (``s`` straight, ``l``/``L`` left, ``r``/``R``
-    right, ``t`` turnaround); ``tls``/``link_index`` name the traffic light that controls it.
+    right, ``t`` turnaround); ``tls``/``link_index`` name the traffic light that controls it;
+    ``state`` is SUMO's right of way of a link without a light (``M`` major, ``m`` minor, ``=``
+    equal, ``s`` stop, ``w`` all-way stop; ``o`` where a light controls it).
     """
 
     from_edge: str
@@ -45,6 +47,40 @@ class Connection:
     direction: str
     tls: str
     link_index: int
+    state: str = "M"
+
+
+@dataclass(frozen=True)
+class LinkConflict:
+    """Where another link through the same junction comes within a car's width of a link (a
+    crossing, a merge, a close pass): from ``at_m`` to ``clear_m`` [m] along this link's junction
+    lanes, ``foe_at_m`` to ``foe_clear_m`` [m] along the ``foe`` link's, both from the junction's
+    entry (the stop line)."""
+
+    foe: Connection
+    at_m: float
+    clear_m: float
+    foe_at_m: float
+    foe_clear_m: float
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """A pedestrian crossing over the roads of a junction: its centreline (N, 2) [m] and width [m],
+    the walking areas at its two ends, and the traffic light link of its pedestrian signal
+    (``tls`` "" where it has none)."""
+
+    id: str
+    shape: np.ndarray
+    width: float
+    walkingareas: tuple[str, ...]
+    tls: str
+    link_index: int
+
+
+CONFLICT_WIDTH_M = 2.2
+"""Two links conflict where their centrelines come closer than this [m] (two car widths' halves
+and a margin)."""
 
 
 @dataclass(frozen=True)
@@ -136,6 +172,7 @@ class RoadNetwork:
                             direction=c.getDirection(),
                             tls=c.getTLSID() or "",
                             link_index=int(c.getTLLinkIndex()),
+                            state=c.getState() or "M",
                         )
                     )
             self.connections[edge_id] = tuple(conns)
@@ -160,6 +197,17 @@ class RoadNetwork:
         self.edge_length = {e: self.lanes[ids[0]].length for e, ids in self.edge_lanes.items()}
         self.drivable_edges: tuple[str, ...] = tuple(sorted(self.edge_lanes))
         self.tls_ids: tuple[str, ...] = tuple(sorted(t.getID() for t in net.getTrafficLights()))
+        signals = _crossing_signals(self.path)
+        self.crossings: dict[str, Crossing] = {}
+        """Pedestrian crossings by edge id."""
+        for edge in net.getEdges(withInternal=True):
+            if edge.getFunction() != "crossing" or not edge.getLanes():
+                continue
+            lane = edge.getLanes()[0]
+            ends = tuple(e.getID() for e in (*edge.getIncoming(), *edge.getOutgoing()))
+            tls, index = signals.get(edge.getID(), ("", -1))
+            self.crossings[edge.getID()] = Crossing(edge.getID(), np.asarray(lane.getShape(), dtype=float)[:, :2],
+                                                    float(lane.getWidth()), ends, tls, index)
 
     def _final_edge(self, net, lane_id: str) -> str:
         """The normal edge a (possibly internal) lane leads onto."""
@@ -263,11 +311,11 @@ class RoadNetwork:
         One lane change takes ``max(change_m, change_s * speed limit)`` [m] of an edge's room: its
         length less the last ``cutoff_m`` [m] before the junction where lane changes are closed, or
         on the goal edge the goal's position ``goal_pos`` [m] (None: the goal edge's room like any
-        edge's). Entering an edge, the car can reach the edge's good lanes from a lane at most
-        room / change lanes away; the good lanes of the edge before are those that link onto
-        such a lane (a short goal edge or a roundabout's ring segment allows none: the car must
-        arrive in the right lane; several lanes to cross on a fast road need a long edge). Where
-        no lane qualifies, every lane that links on is kept.
+        edge's). The good lanes of an edge are those whose link onto the next edge lands within as
+        many lane changes of that edge's good lanes as its room allows: before a long edge every
+        linking lane; before one without room (a short goal edge, a roundabout's ring segment) only
+        a lane whose link lands on a good lane. Where no lane does, the links landing fewest lane
+        changes away are kept.
         """
         return self._route_lanes(tuple(route), goal_lane, goal_pos, float(change_m), float(change_s), float(cutoff_m))
 
@@ -281,13 +329,13 @@ class RoadNetwork:
             room = goal_pos if last and goal_pos is not None else self.edge_length[to_edge] - cutoff_m
             targets = [self.lanes[ln].index for ln in good[-1]]
             links = self.links(edge, to_edge)
-            reach = []
+            changes, fits = {}, {}
             for c in links:
                 to_lane = self.lanes[c.to_lane]
-                changes = min(abs(to_lane.index - t) for t in targets)
-                reach.append(changes * max(change_m, change_s * to_lane.speed) <= max(room, 0.0))
-            good.append(frozenset(c.from_lane for c, ok in zip(links, reach) if ok)
-                        or frozenset(c.from_lane for c in links))
+                changes[c] = min((abs(to_lane.index - t) for t in targets), default=0)
+                fits[c] = changes[c] * max(change_m, change_s * to_lane.speed) <= max(room, 0.0)
+            fewest = min(changes.values(), default=0)
+            good.append(frozenset(c.from_lane for c in links if fits[c] or changes[c] == fewest))
         return tuple(reversed(good))
 
     def neighbour_lane(self, lane_id: str, side: int) -> str | None:
@@ -328,6 +376,53 @@ class RoadNetwork:
             lanes.append(lane)
             lane = self.follow(lane, link.to_edge)
         return tuple(lanes)
+
+    def link_shape(self, link: Connection) -> np.ndarray:
+        """The centreline (N, 2) [m] of a link's junction lanes, from the stop line on (empty if none)."""
+        lanes = self.link_lanes(link)
+        if not lanes:
+            return np.zeros((0, 2))
+        return np.vstack([self.lane(ln).shape for ln in lanes])
+
+    @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
+    def link_conflicts(self, link: Connection) -> tuple[LinkConflict, ...]:
+        """The links of the same junction (from other lanes) whose centreline comes within
+        ``CONFLICT_WIDTH_M`` of ``link``'s: crossings, merges, close passes (pure geometry of the
+        junction lanes; who has the right of way is the links' state or signal)."""
+        node = self.edge_from_to[link.from_edge][1]
+        shape = self.link_shape(link)
+        if len(shape) < 2:
+            return ()
+        out = []
+        for edge, (_, to_node) in self.edge_from_to.items():
+            if to_node != node:
+                continue
+            for foe in self.connections[edge]:
+                foe_shape = self.link_shape(foe)
+                if foe.from_lane == link.from_lane or len(foe_shape) < 2:
+                    continue
+                zone, foe_zone = _close_stretch(shape, foe_shape), _close_stretch(foe_shape, shape)
+                if zone is not None and foe_zone is not None:
+                    out.append(LinkConflict(foe, *zone, *foe_zone))
+        return tuple(out)
+
+    @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
+    def link_crossings(self, link: Connection) -> tuple[tuple[Crossing, float, float], ...]:
+        """The pedestrian crossings of the junction that ``link`` passes over or beside: (crossing,
+        start, end [m] along the link's junction lanes of the stretch within half the crossing's
+        width and a car's half width and a margin of the crossing's centreline)."""
+        node = self.edge_from_to[link.from_edge][1]
+        shape = self.link_shape(link)
+        if len(shape) < 2:
+            return ()
+        out = []
+        for crossing in self.crossings.values():
+            if not crossing.id.startswith(f":{node}_"):
+                continue
+            zone = _close_stretch(shape, crossing.shape, width_m=crossing.width / 2 + 1.2)
+            if zone is not None:
+                out.append((crossing, *zone))
+        return tuple(out)
 
     def route_link(self, edge: str, to_edge: str, lane_id: str, allowed: frozenset[str] | None = None) -> Connection:
         """The link from ``edge`` onto ``to_edge`` that a car in ``lane_id`` (a lane of ``edge``) takes:
@@ -445,6 +540,54 @@ class RoutePath:
             if off_m < best_m:
                 best_m, at = off_m, lane.start + arc_m
         return float(np.clip(at, lo, hi))
+
+
+def _crossing_signals(net_path: Path) -> dict[str, tuple[str, int]]:
+    """Crossing edge id -> (traffic light, link index) of its pedestrian signal, read off the net
+    file's connections onto crossings (sumolib skips them unless it reads every pedestrian link)."""
+    import xml.etree.ElementTree as ET
+
+    out = {}
+    for _, elem in ET.iterparse(str(net_path)):
+        if elem.tag == "connection" and elem.get("tl") and elem.get("to", "").startswith(":"):
+            out.setdefault(elem.get("to"), (elem.get("tl"), int(elem.get("linkIndex", -1))))
+        elem.clear()
+    return out
+
+
+def _close_stretch(shape: np.ndarray, other: np.ndarray, spacing: float = 0.5,
+                   width_m: float = CONFLICT_WIDTH_M) -> tuple[float, float] | None:
+    """The first stretch (start, end) [m] along a polyline (N, 2) that lies within ``width_m`` of
+    another (M, 2); None if none does."""
+    s, points = _sample_polyline(shape, spacing)
+    _, dist = _project_points(other, points)
+    close = np.flatnonzero(dist < width_m)
+    if not len(close):
+        return None
+    run = close[: int(np.argmax(np.diff(np.append(close, close[-1] + 2)) > 1)) + 1]
+    return float(s[run[0]]), float(s[run[-1]])
+
+
+def _sample_polyline(shape: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Arc lengths (M,) [m] and points (M, 2) every ``spacing`` [m] along a polyline, ends included."""
+    seg = np.hypot(*np.diff(shape, axis=0).T)
+    total = float(seg.sum())
+    s = np.append(np.arange(0.0, total, spacing), total)
+    return s, np.array([point_along(shape, x) for x in s])
+
+
+def _project_points(shape: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For points (M, 2): arc length [m] of the nearest point of the polyline (N, 2) and the distance to it [m]."""
+    a, b = shape[:-1], shape[1:]
+    ab = b - a
+    seg_len2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
+    t = np.clip(np.einsum("mij,ij->mi", points[:, None, :] - a[None], ab) / seg_len2, 0.0, 1.0)
+    nearest = a[None] + t[..., None] * ab[None]
+    dist = np.hypot(*(points[:, None, :] - nearest).transpose(2, 0, 1))
+    i = np.argmin(dist, axis=1)
+    cum = np.concatenate([[0.0], np.cumsum(np.sqrt(seg_len2))])
+    rows = np.arange(len(points))
+    return cum[i] + t[rows, i] * np.sqrt(seg_len2[i]), dist[rows, i]
 
 
 def project_on_polyline(shape: np.ndarray, point: np.ndarray) -> tuple[float, float]:

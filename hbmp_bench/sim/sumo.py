@@ -149,6 +149,7 @@ class SumoSim:
         self._dims: dict[str, tuple[float, float, bool]] = {}
         self._routes = 0
         self._controlled: dict[str, list[str]] | None = None
+        self._programs: dict[str, tuple[tuple[float, str], ...]] = {}
         self._snapshot_dims: tuple | None = None
 
     # --------------------------------------------------------------- lifecycle
@@ -181,6 +182,7 @@ class SumoSim:
         )
         SumoSim._active = self
         self._controlled = None
+        self._programs = {}
         self._dims = {}
         self._snapshot_dims = None
         self._routes = 0
@@ -325,6 +327,53 @@ class SumoSim:
     def light_state(self, tls: str, link_index: int) -> str:
         """Current signal char (``r``, ``y``, ``g``, ``G`` ...) of one link of a traffic light."""
         return libsumo.trafficlight.getRedYellowGreenState(tls)[link_index]
+
+    def signal_schedule(self, tls: str, link_index: int, horizon_s: float = 60.0) -> tuple[tuple[float, str], ...]:
+        """The signal of one link now and at each change within ``horizon_s`` [s]: ((0, char now),
+        (seconds until the next change, new char), ...), read off the traffic light's program
+        (fixed-time programs; for others the current phase's planned end and the nominal
+        durations after it)."""
+        phases = self._programs.get(tls)
+        if phases is None:
+            program = libsumo.trafficlight.getProgram(tls)
+            logic = next(lg for lg in libsumo.trafficlight.getAllProgramLogics(tls) if lg.programID == program)
+            phases = self._programs[tls] = tuple((float(p.duration), p.state) for p in logic.phases)
+        phase = libsumo.trafficlight.getPhase(tls)
+        now = libsumo.simulation.getTime()
+        char = libsumo.trafficlight.getRedYellowGreenState(tls)[link_index]
+        out = [(0.0, char)]
+        t = max(libsumo.trafficlight.getNextSwitch(tls) - now, 1e-3)  # a switch due now: just after now
+        for k in range(1, 4 * len(phases) + 1):
+            if t > horizon_s:
+                break
+            duration, state = phases[(phase + k) % len(phases)]
+            if state[link_index] != out[-1][1]:
+                out.append((round(t, 3), state[link_index]))
+            t += duration
+        return tuple(out)
+
+    def link_users(self, from_lane: str, junction_lanes: tuple[str, ...], horizon_m: float) -> tuple[tuple[str, float, float], ...]:
+        """The vehicles on a link's junction lanes and those within ``horizon_m`` [m] of it on
+        ``from_lane`` whose next link it is: (id, distance [m] from the front bumper to the link's
+        start, negative inside it, speed [m/s])."""
+        out = []
+        offset = 0.0
+        for lane in junction_lanes:
+            for vid in libsumo.lane.getLastStepVehicleIDs(lane):
+                out.append((vid, -(offset + libsumo.vehicle.getLanePosition(vid)), libsumo.vehicle.getSpeed(vid)))
+            offset += libsumo.lane.getLength(lane)
+        length = libsumo.lane.getLength(from_lane)
+        for vid in libsumo.lane.getLastStepVehicleIDs(from_lane):
+            dist = length - libsumo.vehicle.getLanePosition(vid)
+            links = libsumo.vehicle.getNextLinks(vid) if dist <= horizon_m else ()
+            if links and links[0][4] == junction_lanes[0]:
+                out.append((vid, dist, libsumo.vehicle.getSpeed(vid)))
+        return tuple(out)
+
+    def crossing_waiters(self, crossing: str, walkingareas: tuple[str, ...]) -> tuple[str, ...]:
+        """The pedestrians on the walking areas at a crossing's ends whose next edge is the crossing."""
+        return tuple(pid for area in walkingareas for pid in libsumo.edge.getLastStepPersonIDs(area)
+                     if libsumo.person.getNextEdge(pid) == crossing)
 
     # ---------------------------------------------------------------- commands
     def track_lane(self, vehicle_id: str) -> None:

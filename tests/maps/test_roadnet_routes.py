@@ -134,3 +134,16 @@ def test_route_lanes_cross_several_lanes_of_a_fast_road_in_time():
     good = net.route_lanes(route, "Dout_S_Mout_S_0", goal_pos=96.18)
     assert good == (frozenset({"Kout_W_Dout_S_0", "Kout_W_Dout_S_1"}), frozenset({"Dout_S_Mout_S_0"}))
     assert len(net.lanes_to(*route)) == 4
+
+
+def test_route_lanes_leave_room_for_every_lane_change_before_the_goal():
+    """Town05 at 13.89 m/s: a lane change takes 41.7 m. A goal in the rightmost of three lanes 33 m
+    into its edge leaves room for none (only the lane landing on the goal lane), 45 m for one,
+    90 m for two (every lane)."""
+    net = road_network("Town05")
+    route = ("C4R1_C4R2", "-C3R2_C4R2", "-C2R2_C3R2", "-C1R2_C2R2")
+    good = net.route_lanes(route, "-C1R2_C2R2_1", goal_pos=33.22)
+    assert good[-1] == {"-C1R2_C2R2_1"}
+    assert good[-2] == {"-C2R2_C3R2_1"}
+    assert net.route_lanes(route, "-C1R2_C2R2_1", goal_pos=45.0)[-2] == {"-C2R2_C3R2_1", "-C2R2_C3R2_2"}
+    assert net.route_lanes(route, "-C1R2_C2R2_1", goal_pos=90.0)[-2] == set(net.lanes_to(route[2], route[3]))

@@ -61,7 +61,9 @@ def test_dataset_packs_the_grid_and_round_trips(tmp_path):
 def test_dagger_learns_the_expert_on_held_out_episodes_and_resumes(tmp_path):
     """About a thousand decisions on short Town02 routes, a training round every 128: afterwards the
     policy agrees with the expert on held-out episodes far more often than the same network before
-    training, and more often than always answering the most common label."""
+    training, and more often than always answering the most common label: it removes most of the
+    disagreement of either (measured as disagreement, since how often the most common label
+    occurs depends on the expert's rules)."""
     out = str(tmp_path / "il")
     env = WorkerEnvConfig("hbmp_bench/Town02-Straight-v0", {"fidelity": "event"})
     cfg = DaggerConfig(decisions_per_round=128, updates_per_round=30, batch_size=64, holdout_fraction=0.4)
@@ -80,7 +82,7 @@ def test_dagger_learns_the_expert_on_held_out_episodes_and_resumes(tmp_path):
     trained = build_actor(ckpt)
     before, after = agreement(untrained, holdout), agreement(trained, holdout)
     majority = holdout.label_counts().max() / len(holdout)
-    assert after > before + 0.2 and after > majority + 0.05, (before, after, majority)
+    assert 1.0 - after < 0.4 * min(1.0 - before, 1.0 - majority), (before, after, majority)
     rounds = read_csv(f"{out}/rounds.csv")
     assert rounds["loss"][-1] < rounds["loss"][0] / 2
 

@@ -1,0 +1,236 @@
+"""Privileged quantities of ``info["scene"]``: what the rule-based expert reads besides M_t and R_t.
+
+A learned agent sees only M_t and R_t; the expert (:mod:`hbmp_bench.agents.expert`), a
+demonstrator, may read the simulator's state. :class:`PrivilegedScene` adds these fields to the
+scene of :func:`hbmp_bench.envs.observation.road_profile`: those of :func:`path_actors` (geometry
+of the actors near the path), and
+
+
+  lights_ahead     the traffic lights on the route within ``LIGHTS_RANGE_M``, nearest first (also
+                   beyond junctions without lights, unlike R_t's l_g/l_y/l_r and ``light``): one
+                   (distance from the front bumper to the stop line [m], signal char, schedule) per
+                   light, the schedule ((0, char now), (seconds until the next change, char), ...)
+                   of its link for the next minute
+  route_lane_light the light of the link onto the route's next edge from the lane that continues the
+                   route, where the ego is in another lane: (distance [m], signal char, schedule)
+                   as in ``lights_ahead``, () otherwise (a lane change may lead to another signal)
+  junction_exit_m  distance from the front bumper to the end of the junction the route crosses
+                   next (or is crossing) [m]; inf after the last junction
+  junction_foes    the vehicles on or before (up to ``FOE_RANGE_M``) the links that conflict with
+                   the ego's link through the junction ahead (or the one it is in), see
+                   :func:`junction_foes`
+  crossings        the pedestrian crossings the ego's link through the junction ahead (or the one
+                   it is in) passes over: one dict per crossing with ``ego_dist_m`` / ``ego_exit_m``
+                   (ego front to the start / end of the stretch of its path over the crossing [m]),
+                   ``signal`` (the pedestrians' signal char, "" without a light) and ``waiting_m``
+                   (distance [m] from each pedestrian waiting to step onto it to that stretch)
+  fidelity         the world's fidelity (``event`` or ``continuous``)
+  lane_error_m, heading_error_rad, curvature_ahead
+                   continuous fidelity only: the ego's lateral offset [m] and heading error [rad]
+                   from the centreline the motion planner tracks, and that centreline's sharpest
+                   curvature [1/m] over the next 3 s; a behavior begun with small errors on a
+                   straight stretch ends after about its minimum duration, otherwise it may run to
+                   the planner's maximum (8 s)
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from hbmp_bench.envs.observation import followed_path
+from hbmp_bench.maps.roadnet import Connection, RoadNetwork, point_along, project_on_polyline
+from hbmp_bench.metrics.geometry import stop_line_of
+from hbmp_bench.planning.frame import Path
+from hbmp_bench.sim.sumo import Actors, SumoSim, VehicleState, VehicleType
+
+LEADER_RANGE_M = 100.0
+"""Farthest leader reported, from the ego's front bumper [m]."""
+PEDESTRIAN_RANGE_M = 50.0
+"""Pedestrians up to this far ahead of the front bumper along the path are reported [m] ..."""
+PEDESTRIAN_LATERAL_M = 10.0
+"""... when within this lateral distance of the path [m]."""
+CORRIDOR_MARGIN_M = 0.3
+"""An actor is in the ego's corridor when its footprint comes within the ego's half width plus
+this margin of the path [m]."""
+LIGHTS_RANGE_M = 150.0
+"""Traffic lights up to this far ahead are reported [m]."""
+FOE_RANGE_M = 80.0
+"""Vehicles up to this far before a conflicting link are reported [m]."""
+
+
+def path_actors(path: Path, ego_xy: np.ndarray, ego_length: float, ego_width: float, xy: np.ndarray,
+                yaw: np.ndarray, speed: np.ndarray, length: np.ndarray, width: np.ndarray,
+                is_pedestrian: np.ndarray) -> dict:
+    """The actors near the followed lane's centreline ``path``, measured along it.
+
+    Args:
+        path: the centreline the ego follows (its lane, through the junctions of its route).
+        ego_xy: (2,) ego footprint centre [m]; ego_length / ego_width: its footprint [m].
+        xy, yaw, speed, length, width, is_pedestrian: (K,) the other actors (centres [m],
+            headings [rad], speeds [m/s], footprints [m]).
+
+    Returns:
+        ``leader_gap_m``: free distance from the ego's front bumper to the nearest actor ahead
+        whose footprint lies in the ego's corridor (vehicle or pedestrian), inf if none within
+        ``LEADER_RANGE_M``; ``leader_speed_mps``: that actor's speed along the path [m/s] (0 if
+        none; negative when it comes towards the ego); ``pedestrians``: ((s, d, v_s, v_d), ...) for
+        every pedestrian ahead within ``PEDESTRIAN_RANGE_M`` and ``PEDESTRIAN_LATERAL_M``: its
+        distance along the path from the ego's front bumper [m], signed lateral offset (left
+        positive) [m] and velocity along / across the path (left positive) [m/s], nearest first.
+    """
+    out = {"leader_gap_m": float("inf"), "leader_speed_mps": 0.0, "pedestrians": ()}
+    if len(xy) == 0:
+        return out
+    s_ego, _ = path.frenet(ego_xy)
+    front = float(s_ego) + ego_length / 2
+    near = np.hypot(*(xy - ego_xy).T) < LEADER_RANGE_M + ego_length + 10.0
+    if not near.any():
+        return out
+    idx = np.nonzero(near)[0]
+    s, d, theta, _ = path.project(xy[idx], yaw[idx])
+    s, d, theta = np.atleast_1d(s), np.atleast_1d(d), np.atleast_1d(theta)
+    c, sn = np.abs(np.cos(theta)), np.abs(np.sin(theta))
+    half_long = length[idx] / 2 * c + width[idx] / 2 * sn
+    half_lat = length[idx] / 2 * sn + width[idx] / 2 * c
+    gap = s - half_long - front
+    v_s, v_d = speed[idx] * np.cos(theta), speed[idx] * np.sin(theta)
+    in_corridor = (np.abs(d) - half_lat < ego_width / 2 + CORRIDOR_MARGIN_M) & (s > front) & (gap < LEADER_RANGE_M)
+    if in_corridor.any():
+        k = int(np.argmin(np.where(in_corridor, gap, np.inf)))
+        out["leader_gap_m"] = float(max(gap[k], 0.0))
+        out["leader_speed_mps"] = float(v_s[k])
+    ped = is_pedestrian[idx] & (s - front > -ego_length) & (s - front < PEDESTRIAN_RANGE_M) & (np.abs(d) < PEDESTRIAN_LATERAL_M)
+    order = np.argsort(s[ped])
+    out["pedestrians"] = tuple((float(a), float(b), float(e), float(f)) for a, b, e, f in
+                               zip((s[ped] - front)[order], d[ped][order], v_s[ped][order], v_d[ped][order]))
+    return out
+
+
+def gives_way(signal: str, state: str, other_signal: str, other_state: str) -> bool:
+    """Whether a link must give way to another at the junction: with lights, a permissive green
+    (``g``) to a priority green (``G``); without, a minor or stop link (``m``, ``s``) to a major
+    one (``M``). Links of equal rank (``=``, all-way stops, two permissive greens) give way to
+    neither."""
+    if signal and other_signal:
+        return signal == "g" and other_signal == "G"
+    if not signal and not other_signal:
+        return state in "ms" and other_state == "M"
+    return False
+
+
+def junction_foes(entry_m: float, signal: str, state: str, conflicts, users, foe_signals) -> tuple[dict, ...]:
+    """The ``junction_foes`` of the scene: one dict per vehicle on a conflicting link.
+
+    Args:
+        entry_m: distance from the ego's front bumper to the start of its link [m] (negative inside).
+        signal / state: the ego link's signal char ("" without a light) and static state.
+        conflicts: the :class:`hbmp_bench.maps.roadnet.LinkConflict` s of the ego's link.
+        users: per conflict, the vehicles on or before the foe link: (id, distance from the
+            front bumper to the link's start [m], negative inside, speed [m/s]).
+        foe_signals: per conflict, the foe link's signal char ("" without a light).
+
+    Returns:
+        dicts with ``ego_dist_m`` / ``ego_exit_m``: distance from the ego's front bumper to the
+        start / end of the conflict area [m]; ``foe_dist_m`` / ``foe_exit_m``: the same for the
+        foe's front bumper; ``foe_speed_mps``; ``ego_yields`` / ``foe_yields`` (:func:`gives_way`);
+        ``foe_signal``: the foe's signal before it enters the junction ("" without a light or once
+        inside).
+    """
+    out = []
+    for c, link_users, foe_signal in zip(conflicts, users, foe_signals):
+        for _, dist, speed in link_users:
+            out.append({
+                "ego_dist_m": entry_m + c.at_m, "ego_exit_m": entry_m + c.clear_m,
+                "foe_dist_m": dist + c.foe_at_m, "foe_exit_m": dist + c.foe_clear_m, "foe_speed_mps": float(speed),
+                "ego_yields": gives_way(signal, state, foe_signal, c.foe.state),
+                "foe_yields": gives_way(foe_signal, c.foe.state, signal, state),
+                "foe_signal": foe_signal if dist > 0.0 else "",
+            })
+    return tuple(out)
+
+
+class PrivilegedScene:
+    """The privileged fields of one vehicle's scene in one world (the SUMO queries go through ``sim``).
+
+    Args:
+        net / sim: the world's network and simulation.
+        vehicle_id / vtype: the vehicle the scene is for and its type (footprint).
+        fidelity: the world's fidelity.
+        lane_path: the centreline the motion planner tracks for (lane, next edges) in continuous
+            fidelity (:meth:`hbmp_bench.envs.drivers.ModelDriver.lane_path`), None in event fidelity.
+    """
+
+    def __init__(self, net: RoadNetwork, sim: SumoSim, vehicle_id: str, vtype: VehicleType, fidelity: str,
+                 lane_path=None):
+        self.net, self.sim, self.vehicle_id, self.vtype = net, sim, vehicle_id, vtype
+        self.fidelity, self.lane_path = fidelity, lane_path
+        self._path = functools.lru_cache(maxsize=256)(
+            lambda lane, nxt: followed_path(net, lane, nxt, 10.0, LEADER_RANGE_M + 20.0))
+
+    def fields(self, ego: VehicleState, followed_lane: str, next_edges: tuple[str, ...], actors: Actors,
+               lights: list[tuple[str, int, float, str]], junction_exit_m: float) -> dict:
+        """The fields for the vehicle ``ego`` following ``followed_lane`` onto ``next_edges``, among
+        ``actors``; the world measures along its route the ``lights`` ahead (tls, link index,
+        distance [m], signal) and ``junction_exit_m``."""
+        lane = followed_lane or ego.lane
+        out = path_actors(self._path(lane, tuple(next_edges[:3])), ego.xy, self.vtype.length, self.vtype.width,
+                          actors.xy, actors.yaw, actors.speed, actors.length, actors.width, actors.is_pedestrian)
+        out["lights_ahead"] = tuple((float(d), state, self.sim.signal_schedule(tls, index))
+                                    for tls, index, d, state in lights if d <= LIGHTS_RANGE_M)
+        out["junction_exit_m"] = junction_exit_m
+        link, entry = self._link_ahead(ego, followed_lane, next_edges)
+        out["junction_foes"] = () if link is None else self._junction_foes(link, entry)
+        out["crossings"] = () if link is None else self._crossings(link, entry, actors)
+        out["fidelity"] = self.fidelity
+        if self.lane_path is not None:
+            out.update(self._lane_tracking(ego, lane, next_edges))
+        return out
+
+    def _front(self, ego: VehicleState) -> np.ndarray:
+        return ego.xy + self.vtype.length / 2 * np.array([np.cos(ego.yaw), np.sin(ego.yaw)])
+
+    def _link_ahead(self, ego: VehicleState, followed_lane: str, next_edges: tuple[str, ...]) -> tuple[Connection | None, float]:
+        """The link from the followed lane onto the route's next edge (the junction ahead, or the
+        one the vehicle is in) and the distance from the front bumper to its start [m] (negative
+        inside); (None, nan) where there is none."""
+        if followed_lane not in self.net.lanes:
+            return None, float("nan")
+        lane = self.net.lane(followed_lane)
+        nxt = next_edges[0] if next_edges else None
+        link = next((c for c in self.net.connections[lane.edge] if c.from_lane == followed_lane and c.to_edge == nxt), None)
+        if link is None or len(self.net.link_shape(link)) < 2:
+            return None, float("nan")
+        ends, direction = stop_line_of(lane.shape, lane.width)
+        front = self._front(ego)
+        entry = float((ends[0] - front) @ direction)
+        if entry <= 0.0:
+            entry = -project_on_polyline(self.net.link_shape(link), front)[0]
+        return link, entry
+
+    def _junction_foes(self, link: Connection, entry: float) -> tuple[dict, ...]:
+        conflicts = self.net.link_conflicts(link)
+        users = [tuple(u for u in self.sim.link_users(c.foe.from_lane, self.net.link_lanes(c.foe), FOE_RANGE_M)
+                       if u[0] != self.vehicle_id) for c in conflicts]
+        signals = [self.sim.light_state(c.foe.tls, c.foe.link_index) if c.foe.tls else "" for c in conflicts]
+        signal = self.sim.light_state(link.tls, link.link_index) if link.tls else ""
+        return junction_foes(entry, signal, link.state, conflicts, users, signals)
+
+    def _crossings(self, link: Connection, entry: float, actors: Actors) -> tuple[dict, ...]:
+        shape, out = self.net.link_shape(link), []
+        for crossing, at, clear in self.net.link_crossings(link):
+            point = point_along(shape, 0.5 * (at + clear))
+            waiting = [float(np.hypot(*(actors.xy[actors.ids.index(p)] - point)))
+                       for p in self.sim.crossing_waiters(crossing.id, crossing.walkingareas) if p in actors.ids]
+            out.append({"ego_dist_m": entry + at, "ego_exit_m": entry + clear,
+                        "signal": self.sim.light_state(crossing.tls, crossing.link_index) if crossing.tls else "",
+                        "waiting_m": tuple(sorted(waiting))})
+        return tuple(out)
+
+    def _lane_tracking(self, ego: VehicleState, lane: str, next_edges: tuple[str, ...]) -> dict:
+        path = self.lane_path(lane, tuple(next_edges))
+        s, e, theta, _ = path.project(ego.xy, ego.yaw)
+        ahead = np.arange(s, s + max(3.0 * ego.speed, 5.0) + 10.0, 1.0)
+        return {"lane_error_m": float(e), "heading_error_rad": float(theta),
+                "curvature_ahead": float(np.max(np.abs(path.point_at(ahead)[3])))}

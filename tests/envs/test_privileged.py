@@ -1,0 +1,162 @@
+"""Privileged ``info["scene"]`` fields: the geometry of actors near the followed path, a light's
+schedule read off its program, and the fields in a real episode."""
+
+import math
+
+import numpy as np
+import pytest
+
+from hbmp_bench.envs.privileged import LEADER_RANGE_M, path_actors
+from hbmp_bench.planning.frame import Path
+
+EGO_L, EGO_W = 4.5, 1.8
+
+
+def _actors(*rows):
+    """(xy, yaw, speed, length, width, is_pedestrian) arrays from (x, y, yaw, speed, is_pedestrian) rows."""
+    a = np.array([r[:4] for r in rows], dtype=float).reshape(-1, 4)
+    ped = np.array([r[4] for r in rows], dtype=bool)
+    length = np.where(ped, 0.6, 4.5)
+    width = np.where(ped, 0.6, 1.8)
+    return a[:, :2], a[:, 2], a[:, 3], length, width, ped
+
+
+def _straight():
+    return Path(np.array([[-20.0, 0.0], [200.0, 0.0]]), max_spacing=1.0)
+
+
+def test_path_actors_leader_is_the_nearest_actor_ahead_in_the_corridor():
+    xy, yaw, speed, length, width, ped = _actors(
+        (30.0, 0.0, 0.0, 5.0, False),           # ahead in the lane, driving away at 5 m/s
+        (10.0, 3.5, 0.0, 9.0, False),           # in the next lane: not a leader
+        (-10.0, 0.0, 0.0, 9.0, False),          # behind
+    )
+    out = path_actors(_straight(), np.zeros(2), EGO_L, EGO_W, xy, yaw, speed, length, width, ped)
+    assert out["leader_gap_m"] == pytest.approx(30.0 - 2.25 - 2.25)
+    assert out["leader_speed_mps"] == pytest.approx(5.0)
+    assert out["pedestrians"] == ()
+
+
+def test_path_actors_a_crossing_vehicle_leads_with_its_width_and_no_speed_along_the_path():
+    xy, yaw, speed, length, width, ped = _actors((12.0, 0.0, math.pi / 2, 8.0, False), (30.0, 0.0, 0.0, 5.0, False))
+    out = path_actors(_straight(), np.zeros(2), EGO_L, EGO_W, xy, yaw, speed, length, width, ped)
+    assert out["leader_gap_m"] == pytest.approx(12.0 - 0.9 - 2.25, abs=1e-6)
+    assert out["leader_speed_mps"] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_path_actors_reports_pedestrians_near_the_path_with_their_velocity():
+    xy, yaw, speed, length, width, ped = _actors(
+        (15.0, -4.0, math.pi / 2, 1.3, True),    # walking across from the right
+        (25.0, 5.0, 0.0, 1.2, True),            # walking along on the left
+        (25.0, 30.0, 0.0, 1.2, True),           # far to the side: not reported
+    )
+    out = path_actors(_straight(), np.zeros(2), EGO_L, EGO_W, xy, yaw, speed, length, width, ped)
+    assert math.isinf(out["leader_gap_m"])
+    (s0, d0, vs0, vd0), (s1, d1, vs1, vd1) = out["pedestrians"]
+    assert (s0, d0) == pytest.approx((15.0 - 2.25, -4.0)) and (vs0, vd0) == pytest.approx((0.0, 1.3), abs=1e-6)
+    assert (s1, d1) == pytest.approx((25.0 - 2.25, 5.0)) and (vs1, vd1) == pytest.approx((1.2, 0.0), abs=1e-6)
+
+
+def test_path_actors_follows_the_path_around_a_corner():
+    corner = Path(np.array([[-20.0, 0.0], [0.0, 0.0], [0.0, 100.0]]), max_spacing=0.5)
+    # 10 m before the corner; a car standing 20 m after it, in the lane after the turn
+    xy, yaw, speed, length, width, ped = _actors((0.0, 20.0, math.pi / 2, 0.0, False))
+    out = path_actors(corner, np.array([-10.0, 0.0]), EGO_L, EGO_W, xy, yaw, speed, length, width, ped)
+    assert out["leader_gap_m"] == pytest.approx(10.0 + 20.0 - 2.25 - 2.25, abs=0.5)
+    far = _actors((0.0, LEADER_RANGE_M + 20.0, math.pi / 2, 0.0, False))
+    assert math.isinf(path_actors(corner, np.array([-10.0, 0.0]), EGO_L, EGO_W, *far)["leader_gap_m"])
+
+
+@pytest.mark.slow
+def test_signal_schedule_predicts_the_link_signal_seen_in_sumo():
+    from hbmp_bench.maps import net_path
+    from hbmp_bench.maps.roadnet import load_road_network
+    from hbmp_bench.sim.sumo import SumoSim
+
+    net = load_road_network(str(net_path("Town01")))
+    link = next(c for conns in net.connections.values() for c in conns if c.tls)
+    sim = SumoSim(net_path("Town01"), step_length=0.1)
+    sim.start(seed=0)
+    try:
+        for _ in range(37):
+            sim.step()
+        schedule = sim.signal_schedule(link.tls, link.link_index, horizon_s=60.0)
+        start = sim.time
+        seen = []
+        while sim.time - start < 60.0:
+            seen.append((sim.time - start, sim.light_state(link.tls, link.link_index)))
+            sim.step()
+    finally:
+        sim.close()
+    assert schedule[0] == (0.0, seen[0][1])
+    changes = [(t, c) for (t, c), (_, before) in zip(seen[1:], seen[:-1]) if c != before]
+    assert len(changes) >= 2  # a fixed-time program changes within a minute
+    assert [c for _, c in schedule[1:len(changes) + 1]] == [c for _, c in changes]
+    assert [t for t, _ in schedule[1:len(changes) + 1]] == pytest.approx([t for t, _ in changes], abs=0.11)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("fidelity", ["continuous", "event"])
+def test_privileged_fields_in_a_real_episode(fidelity):
+    from hbmp_bench.agents import load_agent
+    from hbmp_bench.envs import BehaviorEnv
+    from hbmp_bench.envs.world import EGO_ID
+
+    env = BehaviorEnv(town="Town01", task="NavigationDynamic", suite="hbmp", fidelity=fidelity)
+    agent = load_agent("expert")
+    obs, info = env.reset(seed=0, options={"episode_index": 0})
+    agent.reset(info)
+    seen = {"light": 0, "leader": 0, "pedestrian": 0, "foe": 0}
+    try:
+        for _ in range(400 if fidelity == "continuous" else 1500):
+            scene = info["scene"]
+            assert scene["fidelity"] == fidelity
+            lights = scene["lights_ahead"]
+            if lights:
+                seen["light"] += 1
+                assert [d for d, _, _ in lights] == sorted(d for d, _, _ in lights)
+                for d, state, schedule in lights:
+                    assert 0.0 <= d <= 150.0 and schedule[0] == (0.0, state)
+                    assert all(a < b for (a, _), (b, _) in zip(schedule, schedule[1:]))
+                if scene["light"]:  # the light ending the ego's lane is the first light on the route
+                    assert lights[0][:2] == (pytest.approx(scene["stop_distance_m"]), scene["light"])
+            if not scene["in_junction"] and math.isfinite(scene["junction_exit_m"]):
+                assert scene["junction_exit_m"] >= scene["stop_distance_m"] - 0.5
+            if math.isfinite(scene["leader_gap_m"]):
+                seen["leader"] += 1
+                assert scene["leader_gap_m"] >= 0.0
+            seen["pedestrian"] += bool(scene["pedestrians"])
+            for f in scene["junction_foes"]:
+                seen["foe"] += 1
+                assert f["ego_exit_m"] >= f["ego_dist_m"] and f["foe_exit_m"] >= f["foe_dist_m"]
+                assert f["foe_speed_mps"] >= 0.0
+            if fidelity == "continuous":  # SUMO's drivers see the ego's own speed, not a standing car
+                assert env.world.sim.vehicle_state(EGO_ID).speed == pytest.approx(scene["speed_mps"], abs=1e-6)
+            obs, _, terminated, truncated, info = env.step(agent.act(obs, info))
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    assert all(n > 0 for n in seen.values()), seen
+
+
+def test_gives_way_by_signal_or_link_state():
+    from hbmp_bench.envs.privileged import gives_way
+
+    assert gives_way("g", "o", "G", "o") and not gives_way("G", "o", "g", "o")
+    assert not gives_way("g", "o", "g", "o")  # two permissive greens: neither has the right of way
+    assert gives_way("", "m", "", "M") and gives_way("", "s", "", "M")
+    assert not gives_way("", "M", "", "m") and not gives_way("", "=", "", "=")
+
+
+def test_junction_foes_measures_both_cars_to_the_conflict_area():
+    from hbmp_bench.envs.privileged import junction_foes
+    from hbmp_bench.maps.roadnet import Connection, LinkConflict
+
+    foe_link = Connection("a", "a_0", "b", "b_0", ":j_0_0", "s", "j", 3, "o")
+    conflict = LinkConflict(foe_link, at_m=6.0, clear_m=9.0, foe_at_m=4.0, foe_clear_m=7.5)
+    (approaching, inside), = [junction_foes(10.0, "g", "o", [conflict], [(("v1", 20.0, 8.0), ("v2", -2.0, 5.0))],
+                                            ["G"])]
+    assert approaching == {"ego_dist_m": 16.0, "ego_exit_m": 19.0, "foe_dist_m": 24.0, "foe_exit_m": 27.5,
+                           "foe_speed_mps": 8.0, "ego_yields": True, "foe_yields": False, "foe_signal": "G"}
+    assert inside["foe_dist_m"] == 2.0 and inside["foe_signal"] == ""  # inside the junction: its light is behind it
