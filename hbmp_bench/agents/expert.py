@@ -51,6 +51,7 @@ import numpy as np
 from hbmp_bench.agents.base import register_agent
 from hbmp_bench.envs.observation import ObservationConfig
 from hbmp_bench.planning.behaviors import BehaviorConfig, reference_speed
+from hbmp_bench.planning.executor import ExecutorConfig
 
 SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = range(5)
 LANE_WIDTH_M = 3.5
@@ -99,34 +100,35 @@ class Timing:
     of ``speed_down`` stops.
 
     Continuous fidelity: a behavior ends once the planner has converged to its lane (and, for
-    speed_up / speed_down, to its speed), after at least 1 s. Measured in the expert's own
-    episodes: begun with small lane errors (< 0.15 m, < 0.03 rad) on a straight stretch (curvature
-    < 0.01 /m over the next 3 s), outside junctions, no keep or speed_down lasted over 1.2 s and no
-    speed_up over 1.7 s; otherwise 5-24 % of them ran longer than 1.6 s, up to the planner's
-    ``max_duration`` (8 s: in turns, at a crawl, swerving around an obstacle, after a lane change).
-    ``hard_s`` is that longest run, checked against the lines the planner does not see (stop lines,
-    conflict areas); the planner itself brakes for actors in its lane. Event fidelity: every
-    behavior lasts one decision period.
+    speed_up / speed_down, to its speed), after at least 1 s; speed_up, speed_down and keep after
+    at most ``ExecutorConfig.lane_keeping_max_duration`` (2 s), a lane change after at most
+    ``max_duration`` (8 s). ``hard_s`` / ``lane_change_hard_s`` are those longest runs, checked
+    against the lines the planner does not see (stop lines, conflict areas); the typical runs
+    (``keep_s``, ``speed_up_s``, ``lane_change_s``) against the actors the planner itself brakes
+    for. Event fidelity: every behavior lasts one decision period.
     """
 
     keep_s: float
     speed_up_s: float
     lane_change_s: float
     hard_s: float
+    lane_change_hard_s: float
     stop_decel: float
     accel: float
     crawl_s: float = 0.1
     """How long a lane change begun below 2 m/s may run (slow to converge sideways) [s]."""
 
     @staticmethod
-    def for_period(period_s: float, continuous: bool, settled: bool = False) -> "Timing":
-        """Timing of a behavior in event fidelity (``period_s``) or with the motion planner,
-        ``settled`` on a straight lane (small lane errors, no curve ahead, not in a junction)."""
+    def for_period(period_s: float, continuous: bool, executor: ExecutorConfig = ExecutorConfig()) -> "Timing":
+        """Timing of a behavior in event fidelity (``period_s``) or with the motion planner
+        (``executor``: its longest runs)."""
         if continuous:
-            return Timing(keep_s=1.5, speed_up_s=2.0, lane_change_s=3.0, hard_s=2.0 if settled else 8.0,
-                          stop_decel=3.0, accel=INF, crawl_s=8.0)
+            return Timing(keep_s=1.5, speed_up_s=executor.lane_keeping_max_duration, lane_change_s=3.0,
+                          hard_s=executor.lane_keeping_max_duration, lane_change_hard_s=executor.max_duration,
+                          stop_decel=3.0, accel=INF, crawl_s=executor.max_duration)
         p = max(period_s, 0.1)
-        return Timing(keep_s=p, speed_up_s=p, lane_change_s=p, hard_s=p, stop_decel=3.5, accel=2.6, crawl_s=p)
+        return Timing(keep_s=p, speed_up_s=p, lane_change_s=p, hard_s=p, lane_change_hard_s=p, stop_decel=3.5,
+                      accel=2.6, crawl_s=p)
 
 
 @register_agent("expert")
@@ -143,6 +145,7 @@ class ExpertAgent:
         foe_margin_s: time kept between the ego and a junction foe in a conflict area [s].
         grid: the M_t grid it reads (must match the environment's).
         behavior: the v_ref rule of speed_up / speed_down (must match the environment's).
+        executor: the motion planner's behavior timing (must match the environment's).
     """
 
     name = "expert"
@@ -150,7 +153,7 @@ class ExpertAgent:
     def __init__(self, cruise_fraction: float = 0.9, turn_speed_mps: float = 6.0, stop_margin_m: float = 2.0,
                  standstill_gap_m: float = 3.0, time_gap_s: float = 1.2, leader_decel: float = 4.5,
                  foe_margin_s: float = 1.5, grid: ObservationConfig | None = None,
-                 behavior: BehaviorConfig | None = None):
+                 behavior: BehaviorConfig | None = None, executor: ExecutorConfig | None = None):
         self.cruise_fraction = cruise_fraction
         self.turn_speed_mps = turn_speed_mps
         self.stop_margin_m = stop_margin_m
@@ -160,6 +163,7 @@ class ExpertAgent:
         self.foe_margin_s = foe_margin_s
         self.grid = grid or ObservationConfig()
         self.behavior = behavior or BehaviorConfig()
+        self.executor = executor or ExecutorConfig()
         self._stuck_s = 0.0
 
     def reset(self, info):
@@ -170,14 +174,7 @@ class ExpertAgent:
         period = float(info.get("duration_s", 0.1))
         fidelity = scene.get("fidelity")
         continuous = fidelity == "continuous" if fidelity else period > 0.2
-        v = scene["speed_mps"]
-        settled = (abs(scene.get("lane_error_m", INF)) < 0.15 and abs(scene.get("heading_error_rad", INF)) < 0.03
-                   and scene.get("curvature_ahead", INF) < 0.01 and not scene["in_junction"]
-                   and scene.get("leader_gap_m", INF) > max(3.0 * v, 5.0) + 15.0)  # the planner brakes for a leader
-        # standing just past a junction with its rear still in it (on its crossing), the ego moves
-        # up rather than wait there for a behavior that surely ends in time
-        rear_in_junction = not scene["in_junction"] and scene.get("lane_pos_m", INF) - EGO_LENGTH_M < 1.0
-        return Timing.for_period(period, continuous, settled or (rear_in_junction and v < 0.5))
+        return Timing.for_period(period, continuous, self.executor)
 
     @staticmethod
     def _time_to(distance_m: float, v: float, accel: float = 2.0, v_max: float = INF) -> float:
@@ -194,15 +191,18 @@ class ExpertAgent:
         return t_acc + (distance_m - d_acc) / v_max
 
     @staticmethod
-    def _meets(targets: list[Target], v: float, v_to: float, hold_s: float, t: Timing, tolerance: float) -> bool:
+    def _meets(targets: list[Target], v: float, v_to: float, hold_s: float, t: Timing, tolerance: float,
+               hard_s: float | None = None) -> bool:
         """Whether a behavior that takes the speed from ``v`` to ``v_to`` and holds it for
-        ``hold_s`` [s] (``t.hard_s`` for hard targets) still lets a chain of speed_down meet
-        every target; a speed cap may be exceeded by ``tolerance`` [m/s], a stop never."""
+        ``hold_s`` [s] (at least ``hard_s``, default ``t.hard_s``, for hard targets) still lets a
+        chain of speed_down meet every target; a speed cap may be exceeded by ``tolerance`` [m/s],
+        a stop never."""
+        hard_s = t.hard_s if hard_s is None else hard_s
         v_then = 0.0 if t.hard_s > 1.0 else 8.0  # decisions every 0.1 s keep speeding up
         for g in targets:
             if v_to <= g.speed_mps + (tolerance if g.speed_mps > 0.0 else 0.0) or g.passes_outside(v, v_to, v_then):
                 continue
-            travel = max(v, v_to) * (max(hold_s, t.hard_s) if g.hard else hold_s)
+            travel = max(v, v_to) * (max(hold_s, hard_s) if g.hard else hold_s)
             if g.at_m <= 0.0 or travel + (v_to ** 2 - g.speed_mps ** 2) / (2.0 * t.stop_decel) > g.at_m:
                 return False
         return True
@@ -385,7 +385,7 @@ class ExpertAgent:
         elif lights:  # unknown: counts as red
             lines.append(Target(lights[0][0] - self.stop_margin_m, 0.0, "red_light", hard=True))
         hold = t.lane_change_s if v >= 2.0 else max(t.lane_change_s, t.crawl_s)
-        return self._meets(lines, v, v_lc, hold, t, tolerance=1.0)
+        return self._meets(lines, v, v_lc, hold, t, tolerance=1.0, hard_s=t.lane_change_hard_s)
 
     # ---------------------------------------------------------------- act
     def targets(self, observation: dict, info: dict) -> list[Target]:

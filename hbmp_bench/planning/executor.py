@@ -22,11 +22,19 @@
   incoming ego state has ``|e| < e_thresh`` and ``|theta_e| < theta_thresh`` on the
   target lane and, for speed_up / speed_down, ``|v - v_ref| < v_thresh`` (``v_ref`` capped
   for curves by the latest plan, see :func:`.planner.curve_speed_cap`); or
-  ``max_duration`` [s] has elapsed (reason ``"timeout"``). A behavior that keeps the ego
+  its longest run has elapsed (reason ``"timeout"``): ``max_duration`` [s] for a lane change,
+  ``lane_keeping_max_duration`` [s] for speed_up, speed_down and keep (see below). A behavior that keeps the ego
   standing (``v_ref`` and the speed both below ``standstill_speed``, e.g. keep or
   speed_down at a red light) skips the lane condition: a car at rest cannot reduce ``e`` or
   ``theta_e``, and without this it would wait ``max_duration`` before the next decision
   (not in the paper; it keeps a waiting car's decisions at ~1 s).
+* Deviation (not in the paper, which gives no longest run): a behavior that stays in its lane
+  ends after ``lane_keeping_max_duration`` (2 s) even when the lane errors have not met the
+  thresholds. Such a behavior converges to the lane the ego is already on, so its lateral error
+  only measures tracking lag in a bend, a junction turn or a swerve around an obstacle; waiting
+  for it left the behavior layer blind for up to 8 s there (a speed_down begun 31 m before a red
+  line ran 4.6 s and crossed it). The speed condition still needs only ~1.5 s (a 35 % step at
+  3.4 m/s²), so a chain of speed_down decides about once a second everywhere.
 * ``c~_total`` of the executed trajectory = the MEAN of the chosen sample's ``c_total``
   over the replans whose control was executed (the final, finishing step is not counted).
 """
@@ -86,7 +94,8 @@ class ExecutorConfig:
         theta_thresh: heading-error threshold [rad].
         v_thresh: speed-error threshold of speed_up / speed_down [m/s].
         min_duration: a behavior lasts at least this long [s] (decisions ~1 Hz).
-        max_duration: a behavior is stopped after this long [s].
+        max_duration: a lane change is stopped after this long [s].
+        lane_keeping_max_duration: speed_up, speed_down and keep are stopped after this long [s].
         standstill_speed: below this speed [m/s] the ego stands; a behavior whose ``v_ref``
             is also below it needs no lane convergence to finish (0 disables this).
         reward_scale: ``scale`` of :func:`reward_from_cost` used by :meth:`BehaviorExecutor.reward`.
@@ -99,18 +108,21 @@ class ExecutorConfig:
     v_thresh: float = 0.5
     min_duration: float = 1.0
     max_duration: float = 8.0
+    lane_keeping_max_duration: float = 2.0
     standstill_speed: float = 0.05
     reward_scale: float = 1.0
 
     def __post_init__(self):
-        for name in ("dt", "e_thresh", "theta_thresh", "v_thresh", "max_duration", "reward_scale"):
+        for name in ("dt", "e_thresh", "theta_thresh", "v_thresh", "max_duration", "lane_keeping_max_duration",
+                     "reward_scale"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"ExecutorConfig.{name} must be finite and > 0, got {v!r}")
         if not (math.isfinite(self.standstill_speed) and 0 <= self.standstill_speed < self.v_thresh):
             raise ValueError("ExecutorConfig.standstill_speed must be in [0, v_thresh) [m/s]")
-        if not (math.isfinite(self.min_duration) and 0 <= self.min_duration <= self.max_duration):
-            raise ValueError("ExecutorConfig.min_duration must be in [0, max_duration]")
+        if not (math.isfinite(self.min_duration)
+                and 0 <= self.min_duration <= min(self.max_duration, self.lane_keeping_max_duration)):
+            raise ValueError("ExecutorConfig.min_duration must be in [0, min(max_duration, lane_keeping_max_duration)]")
         r = self.replan_every
         if not isinstance(r, (int, np.integer)) or isinstance(r, bool) or r < 1:
             raise ValueError(f"ExecutorConfig.replan_every must be an int >= 1, got {r!r}")
@@ -175,6 +187,8 @@ class BehaviorExecutor:
         self.requested = Behavior(int(behavior))
         self.behavior, self.target = target_path(self.requested, refs)
         self.speed_limit = float(speed_limit)
+        changes_lane = self.behavior in (Behavior.CHANGE_LEFT, Behavior.CHANGE_RIGHT)
+        self.max_duration = self.cfg.max_duration if changes_lane else self.cfg.lane_keeping_max_duration
         self.v_ref = reference_speed(self.behavior, ego.v, speed_limit, self.behavior_cfg)
         self._s, *_ = self.target.project(ego.xy, ego.yaw)
         self._plan: PlanResult | None = None
@@ -205,7 +219,7 @@ class BehaviorExecutor:
             conv = True  # standing, and asked to stand: the lane errors cannot change
         if conv and self.elapsed >= c.min_duration - eps:
             return "converged"
-        if self.elapsed >= c.max_duration - eps:
+        if self.elapsed >= self.max_duration - eps:
             return "timeout"
         return None
 

