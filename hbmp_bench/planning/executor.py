@@ -18,23 +18,21 @@
   :func:`.behaviors.reference_speed` from the speed at decision time.
 * Replanning every ``replan_every`` steps (default every step: 10 Hz at ``dt = 0.1`` s);
   tracking every step (:class:`.tracking.TrajectoryTracker`).
-* Finish: at the start of a step, after at least ``min_duration`` [s] of execution, the
-  incoming ego state has ``|e| < e_thresh`` and ``|theta_e| < theta_thresh`` on the
-  target lane and, for speed_up / speed_down, ``|v - v_ref| < v_thresh`` (``v_ref`` capped
-  for curves by the latest plan, see :func:`.planner.curve_speed_cap`); or
-  its longest run has elapsed (reason ``"timeout"``): ``max_duration`` [s] for a lane change,
-  ``lane_keeping_max_duration`` [s] for speed_up, speed_down and keep (see below). A behavior that keeps the ego
-  standing (``v_ref`` and the speed both below ``standstill_speed``, e.g. keep or
-  speed_down at a red light) skips the lane condition: a car at rest cannot reduce ``e`` or
-  ``theta_e``, and without this it would wait ``max_duration`` before the next decision
-  (not in the paper; it keeps a waiting car's decisions at ~1 s).
-* Deviation (not in the paper, which gives no longest run): a behavior that stays in its lane
-  ends after ``lane_keeping_max_duration`` (2 s) even when the lane errors have not met the
-  thresholds. Such a behavior converges to the lane the ego is already on, so its lateral error
-  only measures tracking lag in a bend, a junction turn or a swerve around an obstacle; waiting
-  for it left the behavior layer blind for up to 8 s there (a speed_down begun 31 m before a red
-  line ran 4.6 s and crossed it). The speed condition still needs only ~1.5 s (a 35 % step at
-  3.4 m/s²), so a chain of speed_down decides about once a second everywhere.
+* Finish, checked at the start of a step after at least ``min_duration`` [s] of execution:
+  a lane change when the incoming ego state has ``|e| < e_thresh`` and ``|theta_e| <
+  theta_thresh`` on the target lane (the paper's rule); speed_up / speed_down when ``|v -
+  v_ref| < v_thresh`` (``v_ref`` capped for curves by the latest plan, see
+  :func:`.planner.curve_speed_cap`); keep at once. Otherwise when its longest run has elapsed
+  (reason ``"timeout"``): ``max_duration`` [s] for a lane change, ``lane_keeping_max_duration``
+  [s] for the others.
+* Deviation: the paper ends every behavior on the lane condition. For a behavior that stays in
+  its lane the ego is normally on that lane already, so the condition holds at once there; in a
+  bend, a junction turn or a swerve around an obstacle it only measures tracking lag, and waiting
+  for it left the behavior layer blind for up to 8 s (a speed_down begun 31 m before a red line
+  ran 4.6 s and crossed it; another plateaued at its v_ref for a second waiting for the lane and
+  crossed). Here such behaviors end on their speed alone, after 1 to 2 s, so a chain of
+  speed_down brakes continuously and decides about once a second everywhere; the motion is
+  unchanged (the next behavior plans on the same lane).
 * ``c~_total`` of the executed trajectory = the MEAN of the chosen sample's ``c_total``
   over the replans whose control was executed (the final, finishing step is not counted).
 """
@@ -90,14 +88,12 @@ class ExecutorConfig:
     Attributes:
         dt: control / tracking period [s].
         replan_every: replan every this many steps (1 -> 1/dt Hz).
-        e_thresh: lateral-error threshold [m].
-        theta_thresh: heading-error threshold [rad].
+        e_thresh: lateral-error threshold of a lane change [m].
+        theta_thresh: heading-error threshold of a lane change [rad].
         v_thresh: speed-error threshold of speed_up / speed_down [m/s].
         min_duration: a behavior lasts at least this long [s] (decisions ~1 Hz).
         max_duration: a lane change is stopped after this long [s].
         lane_keeping_max_duration: speed_up, speed_down and keep are stopped after this long [s].
-        standstill_speed: below this speed [m/s] the ego stands; a behavior whose ``v_ref``
-            is also below it needs no lane convergence to finish (0 disables this).
         reward_scale: ``scale`` of :func:`reward_from_cost` used by :meth:`BehaviorExecutor.reward`.
     """
 
@@ -109,7 +105,6 @@ class ExecutorConfig:
     min_duration: float = 1.0
     max_duration: float = 8.0
     lane_keeping_max_duration: float = 2.0
-    standstill_speed: float = 0.05
     reward_scale: float = 1.0
 
     def __post_init__(self):
@@ -118,8 +113,6 @@ class ExecutorConfig:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"ExecutorConfig.{name} must be finite and > 0, got {v!r}")
-        if not (math.isfinite(self.standstill_speed) and 0 <= self.standstill_speed < self.v_thresh):
-            raise ValueError("ExecutorConfig.standstill_speed must be in [0, v_thresh) [m/s]")
         if not (math.isfinite(self.min_duration)
                 and 0 <= self.min_duration <= min(self.max_duration, self.lane_keeping_max_duration)):
             raise ValueError("ExecutorConfig.min_duration must be in [0, min(max_duration, lane_keeping_max_duration)]")
@@ -210,13 +203,14 @@ class BehaviorExecutor:
         self.last_errors = (e, th)
         c = self.cfg
         eps = 1e-9
-        conv = abs(e) < c.e_thresh and abs(th) < c.theta_thresh
-        # the planner may cap v_ref for a curve ahead: converge to the speed it can hold
-        v_target = self.v_ref if self._plan is None else min(self.v_ref, self._plan.v_ref)
-        if self.behavior in (Behavior.SPEED_UP, Behavior.SPEED_DOWN):
-            conv = conv and abs(ego.v - v_target) < c.v_thresh
-        if v_target < c.standstill_speed and abs(ego.v) < c.standstill_speed:
-            conv = True  # standing, and asked to stand: the lane errors cannot change
+        if self.behavior in (Behavior.CHANGE_LEFT, Behavior.CHANGE_RIGHT):
+            conv = abs(e) < c.e_thresh and abs(th) < c.theta_thresh
+        elif self.behavior in (Behavior.SPEED_UP, Behavior.SPEED_DOWN):
+            # the planner may cap v_ref for a curve ahead: converge to the speed it can hold
+            v_target = self.v_ref if self._plan is None else min(self.v_ref, self._plan.v_ref)
+            conv = abs(ego.v - v_target) < c.v_thresh
+        else:
+            conv = True
         if conv and self.elapsed >= c.min_duration - eps:
             return "converged"
         if self.elapsed >= self.max_duration - eps:
