@@ -10,7 +10,8 @@ OpenDRIVE imports get these permissions from netconvert's type map (:func:`typem
 net made by netconvert's default map (CARLA's own ``.net.xml``: parking and bidirectional lanes at
 5 km/h open to cars) gets them from a patch of its lanes (:func:`lane_patches`). A lane's type is
 its ``type`` attribute, else its place in its edge's composite type (``"parking|driving"``: index
-0 parking, index 1 driving), else its edge's type.
+0 parking, index 1 driving) where that names every lane, else ``sidewalk`` for a lane of pedestrians
+only (netconvert's guessed sidewalks), else its edge's type.
 """
 
 from __future__ import annotations
@@ -81,10 +82,11 @@ def lane_type(lane: ET.Element, edge: ET.Element) -> str:
     own = lane.get("type")
     if own:
         return own
+    if (lane.get("allow") or "").split() == ["pedestrian"]:
+        return "sidewalk"  # a guessed sidewalk carries its edge's type
     parts = (edge.get("type") or "").split("|")
-    index = int(lane.get("index", "0"))
-    if len(parts) > 1:
-        return parts[index] if index < len(parts) else ""
+    if len(parts) > 1:  # one part per lane, as netconvert wrote them (not after a sidewalk was added)
+        return parts[int(lane.get("index", "0"))] if len(parts) == len(edge.findall("lane")) else ""
     return parts[0]
 
 
