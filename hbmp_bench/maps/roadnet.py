@@ -126,8 +126,12 @@ class RoadNetwork:
                 e.getID()
                 for e in net.getEdges(withInternal=False)
                 if e.getFunction() == "" and any(ln.allows("pedestrian") for ln in e.getLanes())
+                and any(ln.allows("passenger") for ln in e.getLanes())
             )
         )
+        """Road edges (with a drivable lane, so in ``edge_length``) beside a walkable lane: where
+        pedestrians are spawned. A footpath of an imported map (no drivable lane) is walked, not
+        spawned on."""
         for edge in net.getEdges(withInternal=True):
             drivable = [ln for ln in edge.getLanes() if ln.allows("passenger")]
             if not drivable:
