@@ -39,8 +39,8 @@ from ..errors import UnknownNameError, UserError
 from .lanetypes import lane_patches, patch_xml, typemap_xml
 from .netconvert import netconvert_version, run_netconvert
 from .registry import INFO_SUFFIX, NET_SUFFIX, file_sha256, info_path, user_maps, user_maps_dir
-from .stats import allows
 from .signals import ALL_RED_TIME_S, CROSSING_CLEARANCE_S, retime_yellows
+from .stats import allows
 from .towns import TOWNS
 
 XODR_OPTIONS: tuple[str, ...] = (
