@@ -61,6 +61,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from hbmp_bench.scenarios import get_suite
 
     town, task = _parse_env_id(args.env)
+    if args.town is not None:
+        from hbmp_bench.scenarios import check_town
+
+        town = check_town(args.town)
     load_agent(args.agent)  # fail fast on a bad name, before any simulation starts
     suite = get_suite(args.suite)
     n = min(args.episodes, suite.episodes_per_task)
@@ -68,7 +72,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise ValueError(f"--episodes must be > 0, got {args.episodes}")
     records = run_jobs([Job(suite.name, town, task, args.agent, tuple(range(n)), args.fidelity)],
                        workers=1, progress=not args.json)
-    summary = {"env": args.env, "agent": args.agent, "suite": suite.name, **summarize(records)}
+    summary = {"env": args.env, "town": town, "agent": args.agent, "suite": suite.name, **summarize(records)}
     if args.json:
         summary["records"] = [r.to_dict() for r in records]
         print(json.dumps(summary, indent=2))
@@ -80,7 +84,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_maps(args: argparse.Namespace) -> int:
-    from hbmp_bench.maps import available_maps, import_map, map_stats
+    from hbmp_bench.maps import available_maps, import_map, map_stats, remove_map
 
     if args.maps_cmd == "stats":
         names = args.names or list(available_maps())
@@ -94,8 +98,13 @@ def _cmd_maps(args: argparse.Namespace) -> int:
                     print(f"  {key:24s} {value}")
         return 0
     if args.maps_cmd == "import":
-        path = import_map(args.file, args.name)
+        path = import_map(args.file, args.name, like=args.like, sidewalks=not args.no_sidewalks,
+                          guess_lights=args.guess_lights, lights=args.lights, force=args.force)
         print(f"imported {args.name}: {path}")
+        return 0
+    if args.maps_cmd == "remove":
+        remove_map(args.name)
+        print(f"removed {args.name}")
         return 0
     raise AssertionError(args.maps_cmd)
 
@@ -110,6 +119,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("run", help="run an agent for N episodes of one env id and print a summary")
     p.add_argument("--env", default="hbmp_bench/Town01-Navigation-v0")
+    p.add_argument("--town", default=None, help="built-in or imported map; replaces the env id's town")
     p.add_argument("--agent", default="expert", help="registry name or module:Class")
     p.add_argument("--episodes", type=int, default=5)
     p.add_argument("--suite", default="corl2017")
@@ -118,7 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true")
     p.set_defaults(func=_cmd_run)
 
-    p = sub.add_parser("maps", help="map statistics and import")
+    p = sub.add_parser("maps", help="map statistics, import and removal")
     msub = p.add_subparsers(dest="maps_cmd", required=True)
     q = msub.add_parser("stats", help="statistics of built-in and imported maps")
     q.add_argument("names", nargs="*")
@@ -126,6 +136,16 @@ def build_parser() -> argparse.ArgumentParser:
     q = msub.add_parser("import", help="import an OpenDRIVE .xodr or SUMO .net.xml under a name")
     q.add_argument("file")
     q.add_argument("--name", required=True)
+    q.add_argument("--like", default=None, help="built-in town whose task parameters (CoRL2017 traffic counts, "
+                   "route lengths) the map takes; default: from the map's own size")
+    q.add_argument("--lights", default="source", choices=("source", "lawful"),
+                   help="traffic light programs: the map's own (default) or the benchmark's lawful timing")
+    q.add_argument("--guess-lights", action="store_true", help="add lights at junctions without any")
+    q.add_argument("--no-sidewalks", action="store_true",
+                   help="keep a map without walkable edges so (default: guess sidewalks and crossings)")
+    q.add_argument("--force", action="store_true", help="replace an imported map of the same name")
+    q = msub.add_parser("remove", help="delete an imported map")
+    q.add_argument("name")
     p.set_defaults(func=_cmd_maps)
 
     for module_name in COMMAND_MODULES:

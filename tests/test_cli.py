@@ -245,3 +245,32 @@ def test_missing_checkpoint_through_evaluate_is_one_line(tmp_path, capsys):
                                     "--out", str(out)])
     assert line == f"hbmp-bench: error: agent could not be built: no checkpoint file '{tmp_path / 'nowhere.pt'}'"
     assert not out.exists()
+
+
+def test_maps_import_force_remove_and_town_options(tmp_path, monkeypatch, capsys):
+    import shutil as _shutil
+
+    from hbmp_bench.maps import net_path
+
+    monkeypatch.setenv("HBMP_BENCH_DATA", str(tmp_path / "data"))
+    src = tmp_path / "copy.net.xml"
+    _shutil.copyfile(net_path("Town02"), src)
+    assert main(["maps", "import", str(src), "--name", "mine", "--like", "Town02"]) == 0
+    assert main(["maps", "import", str(src), "--name", "mine"]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert main(["maps", "import", str(src), "--name", "mine", "--force", "--like", "Town02"]) == 0
+    capsys.readouterr()
+    assert main(["maps", "stats", "mine", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)["mine"]["import"]
+    assert info["source"] == "copy.net.xml" and info["like"] == "Town02"
+    for command in (["run", "--town", "nowhere"], ["record", "--env", "hbmp_bench/Town01-Straight-v0", "--town",
+                                                   "nowhere", "--out", str(tmp_path / "x.gif")],
+                    ["evaluate", "--town", "nowhere"]):
+        assert main(command) == 2
+        assert "mine" in capsys.readouterr().err  # the valid maps are listed, the import among them
+    assert main(["run", "--env", "hbmp_bench/Town01-Straight-v0", "--town", "mine", "--episodes", "1", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["town"] == "mine" and out["records"][0]["town"] == "mine" and out["success_rate"] == 1.0
+    assert main(["maps", "remove", "mine"]) == 0
+    assert main(["maps", "remove", "mine"]) == 2
+    assert main(["maps", "remove", "Town01"]) == 2

@@ -40,7 +40,7 @@ def _add_selection(p: argparse.ArgumentParser, agent_default: str | None) -> Non
         p.add_argument("--agent", required=True, help="registry name, module:Class or checkpoint")
     else:
         p.add_argument("--agent", default=agent_default, help="registry name, module:Class or checkpoint")
-    p.add_argument("--towns", nargs="*", help="default: the suite's")
+    p.add_argument("--towns", "--town", nargs="*", help="built-in or imported maps; default: the suite's")
     p.add_argument("--tasks", nargs="*", help="default: the suite's")
     p.add_argument("--episodes", type=int, default=None, help="first N episodes per (town, task); default: all")
     p.add_argument("--fidelity", default=None, help="world fidelity; default: the env's default (recorded)")

@@ -184,6 +184,7 @@ def evaluate(
     path = Path(path) if path is not None else records_path(out_dir, selection[0].suite, agent)
     path.parent.mkdir(parents=True, exist_ok=True)
     check_agent_fingerprint(path, agent, fingerprint)
+    check_map_hashes(path, sorted({t.town for t in selection}))
     repair_records(path)
     ledger = RecordsLedger(path)
     finished = {r.key for r in latest_per_key(ledger.records()) if r.end_reason != SIM_ERROR}
@@ -223,6 +224,33 @@ def check_agent_fingerprint(path: Path, agent: str, fingerprint: str) -> None:
     elif not path.exists() or path.stat().st_size == 0:
         tmp = side.with_name(side.name + ".tmp")
         tmp.write_text(fingerprint + "\n")
+        os.replace(tmp, side)
+
+
+def check_map_hashes(path: Path, towns: Sequence[str]) -> None:
+    """Refuse to resume ``path`` on another net under an imported map's name.
+
+    Records are keyed by town name, so a map imported again under the same name (another town, or
+    the same one with other options) would otherwise be credited with the old net's episodes. The
+    hash of every imported map's net (``maps.map_hash``) is kept in ``<records>.maps`` beside the
+    records; built-in towns change only with the package (``EPISODE_RULES_VERSION``)."""
+    import json
+
+    from hbmp_bench.maps import TOWNS, map_hash
+
+    current = {town: map_hash(town) for town in towns if town not in TOWNS}
+    if not current:
+        return
+    side = path.with_name(path.name + ".maps")
+    known = json.loads(side.read_text()) if side.exists() else {}
+    changed = {t: (known[t], h) for t, h in current.items() if t in known and known[t] != h}
+    if changed:
+        town, (old, new) = next(iter(sorted(changed.items())))
+        raise UserError(f"{path} holds episodes of another map named {town!r} (net {old}, now {new}): evaluate "
+                        f"into another folder (--out), or delete {path.name} and {side.name} to start over")
+    if any(t not in known for t in current):
+        tmp = side.with_name(side.name + ".tmp")
+        tmp.write_text(json.dumps({**known, **current}, indent=2, sort_keys=True) + "\n")
         os.replace(tmp, side)
 
 

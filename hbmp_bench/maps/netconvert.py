@@ -37,3 +37,14 @@ def run_netconvert(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
         msg = (proc.stderr or proc.stdout).strip()
         raise RuntimeError(f"netconvert failed ({proc.returncode}): {msg}")
     return proc
+
+
+def netconvert_version() -> str:
+    """netconvert's version line (``Eclipse SUMO netconvert Version 1.28.0``... first line of
+    ``--version``)."""
+    import sumo
+
+    env = dict(os.environ)
+    env["SUMO_HOME"] = str(sumo.SUMO_HOME)
+    proc = subprocess.run([str(netconvert_binary()), "--version"], env=env, capture_output=True, text=True)
+    return (proc.stdout.strip().splitlines() or ["unknown"])[0]

@@ -28,6 +28,10 @@ junction (solid lines in real towns); a change begun there would enter the junct
 lane's connection."""
 
 
+WALK_SPAWN_MIN_M = 2.0
+"""Pedestrians are spawned only on edges longer than this [m] (1 m from either end)."""
+
+
 @dataclass(frozen=True)
 class Connection:
     """One drivable link from a lane of an edge to a lane of the next edge.
@@ -126,8 +130,12 @@ class RoadNetwork:
                 e.getID()
                 for e in net.getEdges(withInternal=False)
                 if e.getFunction() == "" and any(ln.allows("pedestrian") for ln in e.getLanes())
+                and any(ln.allows("passenger") for ln in e.getLanes()) and e.getLength() > WALK_SPAWN_MIN_M
             )
         )
+        """Road edges (with a drivable lane, so in ``edge_length``) beside a walkable lane, longer than
+        ``WALK_SPAWN_MIN_M``: where pedestrians are spawned. A footpath of an imported map (no drivable
+        lane) or a sliver edge is walked, not spawned on."""
         for edge in net.getEdges(withInternal=True):
             drivable = [ln for ln in edge.getLanes() if ln.allows("passenger")]
             if not drivable:

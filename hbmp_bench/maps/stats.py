@@ -5,7 +5,10 @@ Definitions (units: m):
 * drivable edge: a non-internal edge (no ``function`` attribute, or ``normal``) with at
   least one lane that allows ``passenger``; its vehicle lanes are those lanes.
 * edge length: mean length of the edge's vehicle lanes, m.
-* directed road length: sum of the lengths of all drivable edges (each direction counts).
+* directed road length: sum of the lengths of all drivable edges (each direction counts);
+  driving lane length: the sum over their vehicle lanes (its ratio to the road length is the
+  mean number of lanes per edge, weighted by length).
+* walkable edge: a normal edge with a lane that allows ``pedestrian``.
 * junctions: ``traffic_light*`` nodes are TLS junctions; ``priority``, ``priority_stop``,
   ``right_before_left``, ``left_before_right``, ``allway_stop`` and ``zipper`` nodes are
   priority junctions; dead ends, internal and other nodes are no junctions.
@@ -50,16 +53,19 @@ def _is_sidewalk(lane: ET.Element) -> bool:
 def net_stats(path: str | Path) -> dict:
     """Statistics of the net file at ``path`` (see the module docstring).
 
-    Returns a dict with ``directed_road_length_m`` (float, m), ``drivable_edges``,
+    Returns a dict with ``directed_road_length_m`` and ``driving_lane_length_m`` (float, m),
+    ``drivable_edges``,
     ``lanes_per_edge`` ({lane count as str: number of drivable edges}),
     ``tls_junctions``, ``priority_junctions``, ``roundabouts``, ``extent_m``
-    ([width, height], m), ``has_sidewalks`` (bool), ``crossings`` (int) and the signal
+    ([width, height], m), ``has_sidewalks`` (bool), ``walkable_edges``, ``crossings`` (int) and the signal
     timing ``tls_*_s`` ([min, max], s).
     """
     root = ET.parse(path).getroot()
     length = 0.0
     drivable = 0
+    lane_length = 0.0
     lanes_per_edge: Counter[int] = Counter()
+    walkable = 0
     sidewalks = False
     crossings = 0
     for edge in root.iter("edge"):
@@ -70,12 +76,14 @@ def net_stats(path: str | Path) -> dict:
             continue
         lanes = edge.findall("lane")
         sidewalks = sidewalks or any(_is_sidewalk(ln) for ln in lanes)
+        walkable += any(allows(ln, "pedestrian") for ln in lanes)
         vehicle = [ln for ln in lanes if allows(ln, "passenger")]
         if not vehicle:
             continue
         drivable += 1
         lanes_per_edge[len(vehicle)] += 1
         length += sum(float(ln.get("length")) for ln in vehicle) / len(vehicle)
+        lane_length += sum(float(ln.get("length")) for ln in vehicle)
 
     types = Counter(j.get("type") for j in root.iter("junction"))
     extent = [0.0, 0.0]
@@ -85,6 +93,7 @@ def net_stats(path: str | Path) -> dict:
         extent = [round(x1 - x0, 2), round(y1 - y0, 2)]
     return {
         "directed_road_length_m": round(length, 2),
+        "driving_lane_length_m": round(lane_length, 2),
         "drivable_edges": drivable,
         "lanes_per_edge": {str(k): lanes_per_edge[k] for k in sorted(lanes_per_edge)},
         "tls_junctions": sum(types[t] for t in TLS_TYPES),
@@ -92,6 +101,7 @@ def net_stats(path: str | Path) -> dict:
         "roundabouts": len(root.findall("roundabout")),
         "extent_m": extent,
         "has_sidewalks": sidewalks,
+        "walkable_edges": walkable,
         "crossings": crossings,
         **{f"tls_{key}": value for key, value in signal_stats(path).items()},
     }

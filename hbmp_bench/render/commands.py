@@ -12,9 +12,10 @@ def _cmd_record(args: argparse.Namespace) -> int:
 
     from hbmp_bench.render.video import record_episode
 
+    town = {} if args.town is None else {"town": args.town}
     record = record_episode(args.env, args.agent, args.out, episode_index=args.episode, suite=args.suite,
                             fidelity=args.fidelity, max_decisions=args.max_decisions, every=args.every,
-                            fps=args.fps, progress=not args.json)
+                            fps=args.fps, progress=not args.json, **town)
     if args.json:
         print(json.dumps(record, indent=2))
         return 0
@@ -60,6 +61,7 @@ def add_commands(subparsers) -> None:
     """Add ``record``, ``plot-planner`` and ``plot-stopping`` to the ``hbmp-bench`` sub-commands."""
     p = subparsers.add_parser("record", help="run an agent on one episode and write a top-down GIF")
     p.add_argument("--env", required=True, help="env id, e.g. hbmp_bench/Town01-Straight-v0")
+    p.add_argument("--town", default=None, help="built-in or imported map; replaces the env id's town")
     p.add_argument("--agent", default="expert", help="registry name or module:Class")
     p.add_argument("--episode", type=int, default=0, help="episode index in the suite")
     p.add_argument("--suite", default="corl2017")

@@ -4,6 +4,7 @@ from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS, Episode, Suite, Traffi
 from hbmp_bench.scenarios.suites import (
     SUITES,
     all_episodes,
+    basis_town,
     check_task,
     check_town,
     get_suite,
@@ -22,6 +23,7 @@ __all__ = [
     "Suite",
     "Traffic",
     "all_episodes",
+    "basis_town",
     "check_task",
     "check_town",
     "get_suite",

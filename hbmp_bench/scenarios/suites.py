@@ -1,8 +1,15 @@
 """Suites (corl2017, hbmp, nocrash-*) and the deterministic episode lists they expand to.
 
-Episodes are a pure function of (suite, town, task): the suite seed drives a numpy
-generator that picks start and goal poses among the routes of the town's lane graph whose
-task category (turn count) and length fit the task. Nothing here starts SUMO.
+Episodes are a pure function of (suite, town, task) and the town's net: the suite seed drives a
+numpy generator that picks start and goal poses among the routes of the town's lane graph whose
+task category (turn count) and length fit the task. Starts and goals lie only on driving lanes
+(the lane graph has no other) of edges longer than the success radius with a usable speed limit
+(:data:`MIN_ROUTE_SPEED_MPS`). Nothing here starts SUMO.
+
+Task parameters of a map (route lengths, traffic counts) are its *basis* town's: a built-in town's
+own, an imported map's ``like`` town (``maps import --like Town02``), or for an imported map
+without one, Town01's scaled by the map's directed road length (as the built-in towns without a
+CoRL2017 figure are).
 """
 
 from __future__ import annotations
@@ -15,7 +22,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from hbmp_bench.errors import UnknownNameError
-from hbmp_bench.maps import TOWNS, available_maps, net_path
+from hbmp_bench.maps import TOWNS, available_maps, map_hash, map_info, net_path
 from hbmp_bench.scenarios.spec import TASKS, Episode, Suite, Traffic
 
 if TYPE_CHECKING:
@@ -29,7 +36,12 @@ MEAN_ROUTE_LENGTH_M: dict[str, tuple[float, float, float]] = {
     "Town05": (250.0, 500.0, 900.0),
 }
 """Target mean route length [m] for (Straight, One turn, Navigation) per town. Town01/02 are the
-CoRL2017 paper's figures; the others scale with town size. Imported maps use Town01's."""
+CoRL2017 paper's figures; the others scale with town size. Imported maps: their ``like`` town's, else
+Town01's scaled by road length (:func:`mean_route_lengths`)."""
+
+MIN_ROUTE_SPEED_MPS = 20.0 / 3.6
+"""Starts and goals lie only on edges whose every lane allows at least this speed [m/s] (20 km/h):
+no parking aisle or service ramp at a walking pace."""
 
 LENGTH_BAND = (0.5, 1.5)
 """Accepted route length as a fraction of the task's mean length."""
@@ -41,7 +53,8 @@ DENSITIES: dict[str, dict[str, tuple[int, int]]] = {
     "dense": {"Town01": (100, 250), "Town02": (70, 150)},
 }
 """(vehicles, pedestrians) per density: CoRL2017 / NoCrash counts for Town01 and Town02; other
-towns scale Town01's counts by directed road length."""
+towns scale Town01's counts by directed road length. A map without walkable edges gets no
+pedestrians (none could be spawned)."""
 
 
 SUITES: dict[str, Suite] = {}
@@ -128,28 +141,69 @@ def road_network(town: str) -> RoadNetwork:
     return load_road_network(str(net_path(check_town(town))))
 
 
+def basis_town(town: str) -> str:
+    """The town whose task parameters ``town`` takes: itself if built-in, else the ``like`` town it
+    was imported with, else itself (parameters scaled from Town01 by its size)."""
+    if town in TOWNS:
+        return town
+    return map_info(check_town(town)).get("like") or town
+
+
 def traffic_for(town: str, task: str, density: str | None) -> Traffic:
-    """Background traffic of a (town, task) under a density (None: the task's CoRL default)."""
+    """Background traffic of a (town, task) under a density (None: the task's CoRL default): the
+    counts of the town's :func:`basis_town`, no pedestrians where the town has no walkable edge."""
     if density is None:
         density = "corl" if task == "NavigationDynamic" else "empty"
     if density not in DENSITIES:
         raise UnknownNameError("density", density, DENSITIES)
     table = DENSITIES[density]
-    if town in table:
-        return Traffic(*table[town])
-    scale = _road_length(town) / _road_length("Town01")
-    vehicles, pedestrians = table["Town01"]
-    return Traffic(round(vehicles * scale), round(pedestrians * scale))
+    basis = basis_town(town)
+    if basis in table:
+        vehicles, pedestrians = table[basis]
+    else:
+        scale = _road_length(basis) / _road_length("Town01")
+        vehicles, pedestrians = (round(n * scale) for n in table["Town01"])
+    if not road_network(town).walkable_edges:
+        pedestrians = 0
+    return Traffic(vehicles, pedestrians)
+
+
+def mean_route_lengths(town: str) -> tuple[float, float, float]:
+    """Target mean route length [m] of (Straight, One turn, Navigation) in ``town``: its
+    :func:`basis_town`'s from :data:`MEAN_ROUTE_LENGTH_M`, else Town01's scaled by road length."""
+    basis = basis_town(town)
+    if basis in MEAN_ROUTE_LENGTH_M:
+        return MEAN_ROUTE_LENGTH_M[basis]
+    scale = _road_length(basis) / _road_length("Town01")
+    return tuple(round(m * scale, 1) for m in MEAN_ROUTE_LENGTH_M["Town01"])
+
+
+def _road_length(town: str) -> float:
+    return _road_length_of(town, map_hash(town))
 
 
 @functools.lru_cache(maxsize=None)
-def _road_length(town: str) -> float:
+def _road_length_of(town: str, net_hash: str) -> float:
     return float(sum(road_network(town).edge_length.values()))
 
 
-@functools.lru_cache(maxsize=None)
+def episode_edges(town: str, success_radius_m: float) -> frozenset[str]:
+    """Edges a start or goal may lie on: longer than ``success_radius_m`` [m], every lane at least
+    :data:`MIN_ROUTE_SPEED_MPS`."""
+    net = road_network(town)
+    return frozenset(e for e, lanes in net.edge_lanes.items()
+                     if net.edge_length[e] > success_radius_m
+                     and min(net.lanes[ln].speed for ln in lanes) >= MIN_ROUTE_SPEED_MPS)
+
+
 def _route_table(town: str) -> tuple[tuple[str, str, int, tuple[str, ...]], ...]:
-    """Every (start edge, goal edge, turns, route) of a town, sorted."""
+    return _route_table_of(town, map_hash(town))
+
+
+@functools.lru_cache(maxsize=None)
+def _route_table_of(town: str, net_hash: str) -> tuple[tuple[str, str, int, tuple[str, ...]], ...]:
+    """Every (start edge, goal edge, turns, route) of a town, sorted (``net_hash``: its net, so that
+    a map imported again under the same name is read again)."""
     net = road_network(town)
     rows = []
     for source in net.drivable_edges:
@@ -171,8 +225,7 @@ def _task_filter(task: str, turns: int) -> bool:
 
 
 def _mean_length(town: str, task: str) -> float:
-    means = MEAN_ROUTE_LENGTH_M.get(town, MEAN_ROUTE_LENGTH_M["Town01"])
-    return means[min(TASKS.index(task), 2)]
+    return mean_route_lengths(town)[min(TASKS.index(task), 2)]
 
 
 def _seed(*parts: object) -> int:
@@ -191,13 +244,14 @@ def sample_episode(
 ) -> Episode:
     """Draw one episode of ``task`` in ``town`` with ``rng``.
 
-    Start and goal positions are drawn on the route's first and last edge; the route is the
-    shortest route between them. Its length is the length driven along its lanes from the start
+    Start and goal positions are drawn on the route's first and last edge, both among
+    :func:`episode_edges`; the route is the shortest route between them. Its length is the length driven along its lanes from the start
     lane to the goal lane, junction lanes included (``RoadNetwork.route_length``). Routes whose length falls
     outside the task's band are rejected; the band widens step by step if a small map has none.
     """
     net = road_network(town)
-    rows = [r for r in _route_table(town) if _task_filter(task, r[2])]
+    usable = episode_edges(town, suite.success_radius_m)
+    rows = [r for r in _route_table(town) if _task_filter(task, r[2]) and r[0] in usable and r[1] in usable]
     if not rows:
         raise ValueError(f"{town} has no route of task {task!r}")
     mean = _mean_length(town, task)
@@ -235,9 +289,20 @@ def sample_episode(
     raise ValueError(f"no {task} route near {mean:.0f} m in {town}")
 
 
-@functools.lru_cache(maxsize=None)
 def suite_episodes(suite_name: str, town: str, task: str) -> tuple[Episode, ...]:
-    """The deterministic episode list of a suite for one (town, task).
+    """The deterministic episode list of a suite for one (town, task) (cached per net: see
+    :func:`episode_list`)."""
+    check_town(town)
+    return _cached_episodes(suite_name, town, task, map_hash(town))
+
+
+@functools.lru_cache(maxsize=None)
+def _cached_episodes(suite_name: str, town: str, task: str, net_hash: str) -> tuple[Episode, ...]:
+    return episode_list(suite_name, town, task)
+
+
+def episode_list(suite_name: str, town: str, task: str) -> tuple[Episode, ...]:
+    """The deterministic episode list of a suite for one (town, task), drawn afresh.
 
     Episode i draws from its own generator seeded by (suite seed, town, pose task, i), so the
     list is identical for every agent and machine. Navigation with dynamic obstacles uses the

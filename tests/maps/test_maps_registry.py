@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import hashlib
+import json
 import shutil
 
 import pytest
 
-from hbmp_bench.errors import UnknownNameError
-from hbmp_bench.maps import (TOWNS, available_maps, import_map, map_stats, net_path,
-                             user_maps_dir)
+from hbmp_bench.errors import UnknownNameError, UserError
+from hbmp_bench.maps import (TOWNS, available_maps, import_map, map_hash, map_info, map_stats, net_path,
+                             remove_map, user_maps_dir)
 
 # One straight 200 m road with one driving lane per direction.
 XODR = """<?xml version="1.0" encoding="UTF-8"?>
@@ -69,7 +71,13 @@ def test_import_net_xml(tmp_path):
     assert stored.parent == user_maps_dir() and stored.is_file()
     assert "my_town" in available_maps()
     assert net_path("my_town") == stored
-    assert map_stats("my_town") == map_stats("Town02")
+    stats = map_stats("my_town")
+    info = stats.pop("import")
+    assert stats == map_stats("Town02")
+    # a net that needs nothing (driving lanes only carry cars, sidewalks present) is stored byte for byte
+    assert stored.read_bytes() == net_path("Town02").read_bytes()
+    assert info["netconvert_runs"] == [] and info["source"] == "copy.net.xml"
+    assert info["source_sha256"] == info["net_sha256"] == hashlib.sha256(src.read_bytes()).hexdigest()
 
 
 def test_import_xodr(tmp_path):
@@ -110,4 +118,68 @@ def test_import_rejects_wrong_extension_missing_file_and_shadowing(tmp_path):
     for name in ("Town01", "town01", "", "../evil"):
         with pytest.raises(ValueError):
             import_map(src, name)
+    assert _user_files() == []
+
+
+def test_import_records_provenance(tmp_path):
+    src = tmp_path / "straight.xodr"
+    src.write_text(XODR, encoding="utf-8")
+    import_map(src, "straight", like="Town02")
+    info = map_info("straight")
+    assert info["source"] == "straight.xodr" and info["format"] == "xodr"
+    assert info["source_sha256"] == hashlib.sha256(src.read_bytes()).hexdigest()
+    assert info["net_sha256"] == hashlib.sha256(net_path("straight").read_bytes()).hexdigest()
+    assert map_hash("straight") == info["net_sha256"][:16]
+    assert info["netconvert"].startswith("Eclipse SUMO netconvert")
+    assert "--opendrive-files" in info["netconvert_runs"][0] and "--tls.guess" in info["netconvert_runs"][0]
+    assert info["like"] == "Town02" and info["lights"] == "source" and info["imported_at"][:2] == "20"
+    assert json.loads((user_maps_dir() / "straight.map.json").read_text()) == info
+
+
+def test_import_refuses_to_overwrite_without_force_and_remove(tmp_path):
+    src = tmp_path / "straight.xodr"
+    src.write_text(XODR, encoding="utf-8")
+    import_map(src, "straight")
+    before = map_info("straight")
+    other = tmp_path / "copy.net.xml"
+    shutil.copyfile(net_path("Town02"), other)
+    with pytest.raises(UserError, match="--force"):
+        import_map(other, "straight")
+    assert map_info("straight") == before
+    import_map(other, "straight", force=True)
+    assert map_info("straight")["source"] == "copy.net.xml"
+    assert map_stats("straight")["drivable_edges"] == map_stats("Town02")["drivable_edges"]
+    remove_map("straight")
+    assert "straight" not in available_maps() and _user_files() == []
+    with pytest.raises(UnknownNameError):
+        remove_map("straight")
+    with pytest.raises(UserError):
+        remove_map("Town01")
+
+
+def test_import_refuses_bad_like_and_lights(tmp_path):
+    src = tmp_path / "straight.xodr"
+    src.write_text(XODR, encoding="utf-8")
+    with pytest.raises(UnknownNameError, match="Town02"):
+        import_map(src, "x", like="Town9")
+    with pytest.raises(UnknownNameError, match="lawful"):
+        import_map(src, "x", lights="green")
+    assert _user_files() == []
+
+
+def test_hostile_and_truncated_files_fail_naming_the_file(tmp_path):
+    bomb = tmp_path / "bomb.xodr"
+    bomb.write_text('<?xml version="1.0"?><!DOCTYPE OpenDRIVE [<!ENTITY a "aaaaaaaaaa">'
+                    '<!ENTITY b "&a;&a;&a;&a;&a;&a;&a;&a;&a;&a;">]><OpenDRIVE>&b;</OpenDRIVE>', encoding="utf-8")
+    truncated_xodr = tmp_path / "cut.xodr"
+    truncated_xodr.write_text(XODR[: len(XODR) // 2], encoding="utf-8")
+    truncated_net = tmp_path / "cut.net.xml"
+    text = net_path("Town02").read_text(encoding="utf-8")
+    truncated_net.write_text(text[: len(text) // 2], encoding="utf-8")
+    binary = tmp_path / "noise.xodr"
+    binary.write_bytes(bytes(range(256)) * 8)
+    for src in (bomb, truncated_xodr, truncated_net, binary):
+        with pytest.raises(ValueError) as info:
+            import_map(src, "bad")
+        assert src.name in str(info.value)
     assert _user_files() == []

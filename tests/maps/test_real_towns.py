@@ -1,0 +1,111 @@
+"""CARLA's own towns imported from OpenDRIVE and from CARLA's SUMO nets (when they are at hand).
+
+The towns are read from ``$HBMP_CARLA_MAPS`` or from ``shared/maps/carla`` beside the repository
+(``<Town>.xodr`` and ``<Town>.net.xml``); the tests skip without them. The package never needs them.
+"""
+
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from hbmp_bench.maps import import_map, map_stats, net_path
+from hbmp_bench.maps.lanetypes import CAR_LANE_TYPES, lane_type
+from hbmp_bench.maps.signals import ALL_RED_TIME_S, read_programs, yellow_time
+from hbmp_bench.scenarios import SUITES, TASKS, road_network, suite_episodes
+from hbmp_bench.scenarios.suites import MIN_ROUTE_SPEED_MPS
+
+CARLA_DIR = Path(os.environ.get("HBMP_CARLA_MAPS") or Path(__file__).resolve().parents[3] / "shared" / "maps" / "carla")
+REAL_TOWNS = sorted(p.name[: -len(".xodr")] for p in CARLA_DIR.glob("*.xodr")) if CARLA_DIR.is_dir() else []
+
+pytestmark = pytest.mark.skipif(not REAL_TOWNS, reason="no CARLA towns at hand (set HBMP_CARLA_MAPS)")
+
+
+def _sources(town: str) -> list[tuple[str, Path]]:
+    out = [("xodr", CARLA_DIR / f"{town}.xodr")]
+    if (CARLA_DIR / f"{town}.net.xml").is_file():
+        out.append(("net", CARLA_DIR / f"{town}.net.xml"))
+    return out
+
+
+def _lane_types(path: Path) -> dict[str, str]:
+    root = ET.parse(path).getroot()
+    return {ln.get("id"): lane_type(ln, e) for e in root.iter("edge") if e.get("function", "normal") == "normal"
+            for ln in e.findall("lane")}
+
+
+def _source_lights(path: Path) -> int:
+    return len(ET.parse(path).getroot().findall("tlLogic"))
+
+
+@pytest.mark.parametrize("town", REAL_TOWNS or ["none"])
+def test_xodr_import_matches_carlas_own_net(town):
+    stats = {}
+    for kind, src in _sources(town):
+        import_map(src, f"{town}_{kind}")
+        stats[kind] = map_stats(f"{town}_{kind}")
+    xodr = stats["xodr"]
+    assert xodr["walkable_edges"] > 0 and xodr["crossings"] > 0
+    if "net" not in stats:
+        return
+    carla = stats["net"]
+    assert xodr["directed_road_length_m"] == pytest.approx(carla["directed_road_length_m"], rel=0.05)
+    lanes_x = xodr["driving_lane_length_m"] / xodr["directed_road_length_m"]
+    lanes_c = carla["driving_lane_length_m"] / carla["directed_road_length_m"]
+    assert lanes_x == pytest.approx(lanes_c, rel=0.05)  # lanes per edge, weighted by length
+    source_lights = _source_lights(CARLA_DIR / f"{town}.net.xml")
+    assert xodr["tls_junctions"] == carla["tls_junctions"] == source_lights
+    assert carla["import"]["source_tls"] == source_lights and carla["walkable_edges"] > 0
+
+
+@pytest.mark.parametrize("town", REAL_TOWNS or ["none"])
+def test_every_episode_of_every_suite_starts_and_ends_on_a_driving_lane(town):
+    for kind, src in _sources(town):
+        name = f"{town}_{kind}"
+        import_map(src, name)
+        types = _lane_types(net_path(name))
+        net = road_network(name)
+        for suite in SUITES.values():
+            for task in suite.tasks:
+                episodes = suite_episodes(suite.name, name, task)
+                assert len(episodes) == suite.episodes_per_task
+                for ep in episodes:
+                    for lane, edge in ((ep.start_lane, ep.route[0]), (ep.goal_lane, ep.route[-1])):
+                        assert types[lane] in CAR_LANE_TYPES, (suite.name, ep.key, lane, types[lane])
+                        assert net.edge_length[edge] > ep.success_radius_m
+                        assert net.lanes[lane].speed >= MIN_ROUTE_SPEED_MPS
+                    if task == "NavigationDynamic" and suite.density is None:
+                        assert ep.traffic.pedestrians > 0 and ep.traffic.vehicles > 0
+
+
+@pytest.mark.parametrize("town", REAL_TOWNS[:1] or ["none"])
+def test_lights_are_the_sources_unless_asked(town):
+    src = CARLA_DIR / f"{town}.xodr"
+    import_map(src, "own")
+    import_map(src, "guessed", guess_lights=True)
+    import_map(src, "lawful", lights="lawful")
+    own, guessed, lawful = (map_stats(n) for n in ("own", "guessed", "lawful"))
+    assert guessed["tls_junctions"] >= own["tls_junctions"] == lawful["tls_junctions"]
+    assert lawful["import"]["lights"] == "lawful" and lawful["tls_all_red_s"] == [ALL_RED_TIME_S, ALL_RED_TIME_S]
+    for program in read_programs(net_path("lawful")).values():
+        if program.vehicle_links:
+            for i in program.yellow_phases():
+                assert program.durations[i] == pytest.approx(yellow_time(program.approach_speed))
+
+
+def test_like_borrows_a_built_in_towns_task_parameters():
+    if not REAL_TOWNS:
+        pytest.skip("no CARLA town")
+    src = CARLA_DIR / f"{REAL_TOWNS[0]}.xodr"
+    import_map(src, "own")
+    import_map(src, "like02", like="Town02")
+    like = suite_episodes("corl2017", "like02", "NavigationDynamic")[0].traffic
+    assert (like.vehicles, like.pedestrians) == (15, 50)
+    own_nav = [e.route_length_m for e in suite_episodes("corl2017", "own", "Navigation")]
+    like_nav = [e.route_length_m for e in suite_episodes("corl2017", "like02", "Navigation")]
+    assert 0.5 * 360 <= sum(like_nav) / len(like_nav) <= 1.5 * 360  # CoRL2017's Town02 band
+    assert own_nav != like_nav
+    assert TASKS[-1] == "NavigationDynamic"
