@@ -54,7 +54,12 @@ Collision check: ego footprint (``length`` x ``width`` inflated by ``safety_marg
 each side) against obstacle footprints (oriented rectangles, Cartesian constant-velocity
 prediction along their heading) at every future step: bounding-circle broad phases
 (per-step sample bounding box, then per sample) followed by an exact separating-axis test
-on the candidate pairs. A sample that touches an obstacle is infeasible. The cheapest
+on the candidate pairs. A sample that touches an obstacle is infeasible.
+
+The obstacle stage (``c_obs`` and the collision check) runs compiled
+(:mod:`.obstacle_kernels`); :func:`obstacle_cost_reference` and :func:`collisions_reference` are
+its numpy form, which the tests hold it to: the same collisions, ``c_obs`` within 5e-6
+relative (the reference sums in float32), the same chosen trajectory on recorded problems. The cheapest
 feasible sample is chosen (ties within ``tie_tolerance`` go to the sample nearest the
 nominal one); if none is feasible, ``collision_free`` is False and the chosen sample is the cheapest one
 (``infeasible_fallback="min_cost"``, default) or the full brake (``"brake"``); the full
@@ -312,8 +317,11 @@ def _sat_overlap(dx, dy, ce, se, hl_e, hw_e, co, so, hl_o, hw_o):
     return ~sep
 
 
-def _collisions(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndarray:
+def collisions_reference(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndarray:
     """(S,) True where a sample's footprint meets an obstacle at any step of ``times``.
+
+    The numpy reference of the compiled :func:`.obstacle_kernels.collisions` that :func:`plan`
+    uses (the tests hold the two to the same booleans).
 
     ``X, Y, PSI``: (T, S) ego poses (time-major) at ``times`` (T,). Broad phase 1:
     obstacle bounding circles against the per-step bounding box of all samples, (K, T);
@@ -354,8 +362,12 @@ def _collisions(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndar
 OBS_EXPONENT_CUTOFF = 10.0
 
 
-def _obstacle_cost(SS, EE, obs: Obstacles, lp: Path, times, cfg: PlannerConfig) -> np.ndarray:
-    """(S,) ``c_obs`` from sample Frenet coordinates ``SS, EE`` (T, S) at ``times`` (T,)."""
+def obstacle_cost_reference(SS, EE, obs: Obstacles, lp: Path, times, cfg: PlannerConfig) -> np.ndarray:
+    """(S,) ``c_obs`` from sample Frenet coordinates ``SS, EE`` (T, S) at ``times`` (T,).
+
+    The numpy reference of :func:`_obstacle_cost` (which runs the compiled
+    :func:`.obstacle_kernels.obstacle_cost`); it sums in float32, the kernel in float64.
+    """
     T, S = SS.shape
     if len(obs) == 0:
         return np.zeros(S)
@@ -382,6 +394,40 @@ def _obstacle_cost(SS, EE, obs: Obstacles, lp: Path, times, cfg: PlannerConfig) 
     g *= np.float32(-1.0 / cfg.sigma_obs)
     np.exp(g, out=g)
     return g.sum(axis=0, dtype=np.float64) / T
+
+
+def _obstacle_arrays(obs: Obstacles) -> tuple[np.ndarray, ...]:
+    """``x, y, yaw, v, length, width`` of ``obs`` as C-contiguous float64 arrays (the kernels' one signature)."""
+    return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in (obs.x, obs.y, obs.yaw, obs.v, obs.length, obs.width))
+
+
+def _obstacle_cost(SS, EE, obs: Obstacles, lp: Path, times, cfg: PlannerConfig) -> np.ndarray:
+    """(S,) ``c_obs`` of samples at Frenet coordinates ``SS, EE`` (T, S) at ``times`` (T,) on the
+    uniformly resampled reference ``lp`` (compiled: :func:`.obstacle_kernels.obstacle_cost`;
+    numpy reference: :func:`obstacle_cost_reference`)."""
+    from .obstacle_kernels import obstacle_cost, project_poses
+
+    if len(obs) == 0:
+        return np.zeros(SS.shape[1])
+    x, y, yaw, v, length, width = _obstacle_arrays(obs)
+    seg = lp.uniform_segments()
+    so0, eo0, tho = project_poses(x, y, yaw, seg.x0, seg.y0, seg.tx, seg.ty, seg.chord, seg.s, seg.heading, seg.dh)
+    return obstacle_cost(np.ascontiguousarray(SS), np.ascontiguousarray(EE), so0, eo0, tho, v, length, width,
+                         np.ascontiguousarray(times, dtype=np.float64), float(cfg.length), float(cfg.width),
+                         float(cfg.kappa_obs), float(cfg.sigma_obs), OBS_EXPONENT_CUTOFF)
+
+
+def _collisions(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndarray:
+    """(S,) True where a sample's footprint (``X, Y, PSI`` (T, S) at ``times`` (T,)) meets an
+    obstacle (compiled: :func:`.obstacle_kernels.collisions`; numpy reference:
+    :func:`collisions_reference`)."""
+    from .obstacle_kernels import collisions
+
+    if len(obs) == 0:
+        return np.zeros(X.shape[1], dtype=bool)
+    return collisions(np.ascontiguousarray(X), np.ascontiguousarray(Y), np.ascontiguousarray(PSI),
+                      *_obstacle_arrays(obs), np.ascontiguousarray(times, dtype=np.float64),
+                      0.5 * cfg.length + cfg.safety_margin, 0.5 * cfg.width + cfg.safety_margin)
 
 
 def instant_costs(path: Path, ego: VehicleState, obstacles: Obstacles,
@@ -487,12 +533,13 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
     c_vel = (np.abs(v_ref - Vf) @ t2) / t2.sum()
     c_dist = 1.0 / (1.0 + np.abs(Vf).sum(axis=1))
     obs = problem.obstacles
-    c_obs = _obstacle_cost(SS[1:], EE[1:], obs, lp, times[1:], cfg)
+    future = times[1:]
+    c_obs = _obstacle_cost(SS[1:], EE[1:], obs, lp, future, cfg)
     costs = np.stack([c_vel, c_dist, c_obs], axis=1)
     total = cfg.w_velocity * c_vel + cfg.w_dist * c_dist + cfg.w_obs * c_obs
 
     # ---- feasibility and choice
-    feasible = ~_collisions(X[1:], Y[1:], PSI[1:], obs, times[1:], cfg)
+    feasible = ~_collisions(X[1:], Y[1:], PSI[1:], obs, future, cfg)
     brake_index = S - 1
     if feasible.any() or cfg.infeasible_fallback == "min_cost":
         cand = np.where(feasible, total, np.inf) if feasible.any() else total
@@ -516,7 +563,8 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
 
 
 def compile_kernels(cfg: PlannerConfig | None = None) -> None:
-    """Compile the roll-out (or load it from numba's on-disk cache) before :func:`plan` is timed.
+    """Compile the roll-out and the obstacle kernels (or load them from numba's on-disk cache)
+    before :func:`plan` is timed.
 
     One :func:`plan` on a straight road with one obstacle: ``plan`` passes the roll-out the same
     argument types whatever the problem, so this compiles the one signature every later call
