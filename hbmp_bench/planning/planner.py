@@ -68,8 +68,10 @@ brake index is always reported in :attr:`PlanResult.brake_index`.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -302,6 +304,34 @@ def _spread(lo: float, hi: float, n: int) -> np.ndarray:
     return np.zeros(1) if n == 1 else np.linspace(lo, hi, n)
 
 
+class _Layout(NamedTuple):
+    """What every :func:`plan` call with one config shares (read-only arrays, built once per config)."""
+
+    times: np.ndarray  # (T,) [s]
+    dv: np.ndarray  # (n_v,) offsets of v(0) from the speed [m/s]
+    dw: np.ndarray  # (n_omega,) offsets of omega(0) from omega_nom [rad/s]
+    dec: np.ndarray  # (S,) deceleration of each sample's speed profile [m/s^2]
+    t2: np.ndarray  # (T - 1,) squared future times [s^2]
+    hold: int  # steps the omega(0) offset is held
+
+
+@functools.lru_cache(maxsize=16)
+def _layout(cfg: PlannerConfig) -> _Layout:
+    n_grid = cfg.n_v * cfg.n_omega
+    times = np.arange(cfg.n_steps + 1) * cfg.dt
+    layout = _Layout(
+        times=times,
+        dv=_spread(-cfg.decel * cfg.v_window_time, cfg.accel * cfg.v_window_time, cfg.n_v),
+        dw=_spread(-cfg.omega_spread, cfg.omega_spread, cfg.n_omega),
+        dec=np.concatenate([np.full(n_grid, cfg.decel), [cfg.decel, cfg.brake_decel]]),
+        t2=times[1:] ** 2,
+        hold=max(1, round(cfg.omega_hold / cfg.dt)),
+    )
+    for a in layout[:-1]:
+        a.setflags(write=False)
+    return layout
+
+
 def _sat_overlap(dx, dy, ce, se, hl_e, hw_e, co, so, hl_o, hw_o):
     """Separating-axis test of oriented rectangles (all arrays (P,)); True = overlap.
 
@@ -396,11 +426,6 @@ def obstacle_cost_reference(SS, EE, obs: Obstacles, lp: Path, times, cfg: Planne
     return g.sum(axis=0, dtype=np.float64) / T
 
 
-def _obstacle_arrays(obs: Obstacles) -> tuple[np.ndarray, ...]:
-    """``x, y, yaw, v, length, width`` of ``obs`` as C-contiguous float64 arrays (the kernels' one signature)."""
-    return tuple(np.ascontiguousarray(a, dtype=np.float64) for a in (obs.x, obs.y, obs.yaw, obs.v, obs.length, obs.width))
-
-
 def _obstacle_cost(SS, EE, obs: Obstacles, lp: Path, times, cfg: PlannerConfig) -> np.ndarray:
     """(S,) ``c_obs`` of samples at Frenet coordinates ``SS, EE`` (T, S) at ``times`` (T,) on the
     uniformly resampled reference ``lp`` (compiled: :func:`.obstacle_kernels.obstacle_cost`;
@@ -409,12 +434,13 @@ def _obstacle_cost(SS, EE, obs: Obstacles, lp: Path, times, cfg: PlannerConfig) 
 
     if len(obs) == 0:
         return np.zeros(SS.shape[1])
-    x, y, yaw, v, length, width = _obstacle_arrays(obs)
+    # Obstacles holds C-contiguous float64 arrays: with these the kernels keep one compiled signature
     seg = lp.uniform_segments()
-    so0, eo0, tho = project_poses(x, y, yaw, seg.x0, seg.y0, seg.tx, seg.ty, seg.chord, seg.s, seg.heading, seg.dh)
-    return obstacle_cost(np.ascontiguousarray(SS), np.ascontiguousarray(EE), so0, eo0, tho, v, length, width,
-                         np.ascontiguousarray(times, dtype=np.float64), float(cfg.length), float(cfg.width),
-                         float(cfg.kappa_obs), float(cfg.sigma_obs), OBS_EXPONENT_CUTOFF)
+    so0, eo0, tho = project_poses(obs.x, obs.y, obs.yaw, seg.x0, seg.y0, seg.tx, seg.ty, seg.chord, seg.s,
+                                  seg.heading, seg.dh)
+    return obstacle_cost(np.ascontiguousarray(SS), np.ascontiguousarray(EE), so0, eo0, tho, obs.v, obs.length,
+                         obs.width, np.ascontiguousarray(times, dtype=np.float64), float(cfg.length),
+                         float(cfg.width), float(cfg.kappa_obs), float(cfg.sigma_obs), OBS_EXPONENT_CUTOFF)
 
 
 def _collisions(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndarray:
@@ -426,8 +452,9 @@ def _collisions(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndar
     if len(obs) == 0:
         return np.zeros(X.shape[1], dtype=bool)
     return collisions(np.ascontiguousarray(X), np.ascontiguousarray(Y), np.ascontiguousarray(PSI),
-                      *_obstacle_arrays(obs), np.ascontiguousarray(times, dtype=np.float64),
-                      0.5 * cfg.length + cfg.safety_margin, 0.5 * cfg.width + cfg.safety_margin)
+                      obs.x, obs.y, obs.yaw, obs.v, obs.length, obs.width,
+                      np.ascontiguousarray(times, dtype=np.float64), 0.5 * cfg.length + cfg.safety_margin,
+                      0.5 * cfg.width + cfg.safety_margin)
 
 
 def instant_costs(path: Path, ego: VehicleState, obstacles: Obstacles,
@@ -479,27 +506,26 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
     """Sample, roll out, score and choose a trajectory (see the module docstring)."""
     cfg = PlannerConfig() if cfg is None else cfg
     ego, path = problem.ego, problem.path
-    n, dt = cfg.n_steps, cfg.dt
-    times = np.arange(n + 1) * dt
+    dt = cfg.dt
+    layout = _layout(cfg)
+    times = layout.times
     s0, e0, th0, k0 = path.project(ego.xy, ego.yaw, hint_s=problem.s_hint)
     v_ref = min(problem.v_ref, curve_speed_cap(path, s0, ego.v, cfg))
 
     # ---- samples of v(0), omega(0) and the two braking samples
     v = ego.v
     v_hi = max(v, problem.speed_limit)
-    v0 = np.clip(v + _spread(-cfg.decel * cfg.v_window_time, cfg.accel * cfg.v_window_time,
-                             cfg.n_v), 0.0, v_hi)
+    v0 = np.clip(v + layout.dv, 0.0, v_hi)
     lim0 = float(omega_limit(v, cfg.yaw_rate_max, cfg.max_curvature, cfg.lat_accel_max))
     g0 = min(1.0, cfg.gain_speed / max(abs(v), 1e-9))
     w_nom = float(np.clip(control_law(v, k0, e0, th0, cfg.k_theta * g0, cfg.k_e * g0 * g0),
                           -lim0, lim0))
-    w0 = w_nom + _spread(-cfg.omega_spread, cfg.omega_spread, cfg.n_omega)
+    w0 = w_nom + layout.dw
     n_grid = cfg.n_v * cfg.n_omega
     V0 = np.concatenate([np.repeat(v0, cfg.n_omega), [v, v]])
     W0 = np.concatenate([np.tile(w0, cfg.n_v), [w_nom, w_nom]])
     v_tgt = np.concatenate([np.full(n_grid, v_ref), [0.0, 0.0]])
-    dec = np.concatenate([np.full(n_grid, cfg.decel), [cfg.decel, cfg.brake_decel]])
-    V = linear_speed_profile(V0, v_tgt, times, cfg.accel, dec)  # (S, T)
+    V = linear_speed_profile(V0, v_tgt, times, cfg.accel, layout.dec)  # (S, T)
     # normalised distance of each sample from the nominal one (tie-breaking only)
     dev = (np.abs(W0 - w_nom) / max(cfg.omega_spread, 1e-9)
            + np.abs(V0 - v) / max((cfg.accel + cfg.decel) * cfg.v_window_time, 1e-9))
@@ -520,7 +546,7 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
     # ---- roll-out (compiled: sequential in time, see .rollout; numba loads on the first call)
     from .rollout import roll_out
 
-    hold = max(1, round(cfg.omega_hold / dt))
+    hold = layout.hold
     X, Y, PSI, SS, EE, W = roll_out(  # floats, whatever the caller gave: one compiled signature
         float(ego.x), float(ego.y), float(ego.yaw), float(s0), float(e0), float(th0), float(k0),
         np.ascontiguousarray(V.T), KTH, KE, np.ascontiguousarray(lim.T), W0 - w_nom, int(hold), float(dt),
@@ -528,7 +554,7 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
         *lp.uniform_segments())  # (T, S) time-major
 
     # ---- costs
-    t2 = times[1:] ** 2
+    t2 = layout.t2
     Vf = V[:, 1:]
     c_vel = (np.abs(v_ref - Vf) @ t2) / t2.sum()
     c_dist = 1.0 / (1.0 + np.abs(Vf).sum(axis=1))

@@ -34,7 +34,8 @@ def _command_line(args: argparse.Namespace) -> str:
              "--workers", str(args.workers), "--seed", str(args.seed), "--out", args.out]
     for flag, value in (("--fidelity", args.fidelity), ("--observation", args.observation),
                         ("--density", args.density), ("--init", args.init), ("--resume", args.resume),
-                        ("--backend", None if args.backend == "process" else args.backend), ("--address", args.address)):
+                        ("--backend", None if args.backend == "process" else args.backend),
+                        ("--address", args.address)):
         if value is not None:
             parts += [flag, value]
     if args.mask_actions:
