@@ -28,6 +28,7 @@ def test_bench_quick_writes_complete_json(tmp_path, capsys):
         row = town[fidelity]
         assert row["decisions"] > 0 and row["sim_steps"] >= row["decisions"]
         assert row["ratio_to_raw"] == pytest.approx(row["sim_steps_per_s"] / raw["steps_per_s"], abs=1e-3)
+        assert row["cpu_ratio_to_raw"] == pytest.approx(row["sim_steps_per_cpu_s"] / raw["steps_per_cpu_s"], abs=1e-3)
         assert row["latency"]["sumo_step"]["n"] >= row["sim_steps"]
         assert row["latency"]["occupancy"]["n"] >= row["decisions"]
         assert row["warm_up_s"] >= 0
