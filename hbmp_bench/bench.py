@@ -12,21 +12,25 @@ each town, env reset seed 0):
 - **env**: :class:`BehaviorEnv` with the expert agent in ``event`` and ``continuous`` fidelity for a
   fixed wall time of ``env.step`` (the agent's and the resets' time excluded; the episode restarts
   when it ends). Sim steps = Σ ``info["duration_s"]`` / step length. Ratio = env sim steps/s ÷ raw
-  steps/s. While it runs, the SUMO step, the actor snapshot, the driver's control period, the
-  planner call, the infraction detectors, M_t and R_t are timed in place (a ``perf_counter`` pair
-  each, ~1 µs).
+  steps/s (the targets' ratio); ``cpu_ratio_to_raw`` is the same with the process's CPU time instead
+  of wall time on both sides, which a machine shared with other work distorts less. While it runs,
+  the SUMO step, the actor snapshot, the driver's control period, the planner call, the infraction
+  detectors, M_t and R_t are timed in place (a ``perf_counter`` pair each, ~1 µs).
 - **highway-env** ``highway-fast-v0`` and ``intersection-v0``: random actions, decisions/s.
 - **scaling**: 1 and 2 worker processes (spawned, one env each, random actions, started together
   behind a barrier), total decisions/s; the workers also report their peak memory (``ru_maxrss``).
+  The same with 1 and 2 Ray actors on a local Ray instance (``ray_scaling``; skipped without the
+  ``ray`` extra): the training backend's workers.
 - **import**: ``import hbmp_bench`` in a fresh interpreter, best of ``import_repeats`` (``import_s``).
 
 The planner's compiled roll-out is compiled (or loaded from numba's cache) before anything is timed,
 in this process and in each scaling worker (:func:`~hbmp_bench.planning.planner.compile_kernels`): a
 first planner call would otherwise include the compile.
 
-The targets (:class:`Targets`) are those of the throughput issue: continuous ≥ 0.4× raw, event ≥
-0.7× raw, decisions/s ≥ 10× (event) and ≥ 5× (continuous) highway-fast-v0, two workers ≥ 1.7×
-one; and of the speed issue: ``import hbmp_bench`` ≤ 0.3 s.
+The targets (:class:`Targets`) are those of the speed issue: continuous ≥ 0.2× raw, event ≥ 0.35×
+raw, continuous decisions/s ≥ 1.5× highway-fast-v0 (event: ≥ 10×, from the throughput issue), a
+planner call ≤ 1.5 raw SUMO steps (mean), two workers ≥ 1.85× one, two Ray actors ≥ 1.7× one,
+peak memory per env process ≤ 450 MB, ``import hbmp_bench`` ≤ 0.3 s.
 """
 
 from __future__ import annotations
@@ -68,15 +72,21 @@ class Targets:
         event_to_raw: event env sim steps/s ÷ raw SUMO steps/s, at least.
         event_to_highway: event env decisions/s ÷ highway-fast-v0 decisions/s, at least.
         continuous_to_highway: continuous env decisions/s ÷ highway-fast-v0 decisions/s, at least.
+        planner_raw_steps: mean planner call ÷ mean raw SUMO step (continuous env), at most.
         two_workers_to_one: decisions/s of 2 workers ÷ 1 worker, at least.
+        two_ray_actors_to_one: decisions/s of 2 Ray actors ÷ 1 actor, at least.
+        peak_rss_mb: peak resident memory of a scaling worker process [MB], at most.
         import_s: ``import hbmp_bench`` in a fresh interpreter [s], at most.
     """
 
-    continuous_to_raw: float = 0.4
-    event_to_raw: float = 0.7
+    continuous_to_raw: float = 0.2
+    event_to_raw: float = 0.35
     event_to_highway: float = 10.0
-    continuous_to_highway: float = 5.0
-    two_workers_to_one: float = 1.7
+    continuous_to_highway: float = 1.5
+    planner_raw_steps: float = 1.5
+    two_workers_to_one: float = 1.85
+    two_ray_actors_to_one: float = 1.7
+    peak_rss_mb: float = 450.0
     import_s: float = 0.3
 
     def __post_init__(self):
@@ -99,6 +109,7 @@ class BenchConfig:
         scaling_workers: worker counts of the scaling measurement (empty skips it).
         scaling_seconds: wall time of each scaling run [s].
         scaling_town / scaling_fidelity: the env the workers run (random actions).
+        ray_workers: Ray actor counts of the same measurement on a local Ray instance (empty skips it).
         import_repeats: fresh interpreters that time ``import hbmp_bench``; the best counts (0 skips it).
         targets: the pass marks.
     """
@@ -114,6 +125,7 @@ class BenchConfig:
     scaling_seconds: float = 15.0
     scaling_town: str = "Town01"
     scaling_fidelity: str = "continuous"
+    ray_workers: tuple[int, ...] = (1, 2)
     import_repeats: int = 3
     targets: Targets = Targets()
 
@@ -126,6 +138,8 @@ class BenchConfig:
             raise ValueError("highway_seconds must be >= 0")
         if any(n <= 0 for n in self.scaling_workers):
             raise ValueError(f"scaling_workers must be > 0, got {self.scaling_workers}")
+        if any(n <= 0 for n in self.ray_workers):
+            raise ValueError(f"ray_workers must be > 0, got {self.ray_workers}")
         if self.scaling_fidelity not in FIDELITIES:
             raise ValueError(f"scaling_fidelity must be one of {FIDELITIES}, got {self.scaling_fidelity!r}")
         if self.import_repeats < 0:
@@ -137,7 +151,7 @@ class BenchConfig:
     def quick(cls) -> "BenchConfig":
         """A smoke run of every part (seconds, not minutes; the numbers mean little)."""
         return cls(towns=("Town01",), raw_steps=200, env_seconds=1.5, highway_seconds=0.5,
-                   scaling_workers=(1,), scaling_seconds=1.0)
+                   scaling_workers=(1,), scaling_seconds=1.0, ray_workers=(1,))
 
 
 # ----------------------------------------------------------------- helpers
@@ -167,6 +181,13 @@ def _dist_version(name: str) -> str:
         return metadata.version(name)
     except metadata.PackageNotFoundError:
         return ""
+
+
+def _missing(module: str) -> str:
+    """Why ``module`` cannot be imported (e.g. an extra not installed), "" when it can."""
+    import importlib.util
+
+    return "" if importlib.util.find_spec(module) else f"{module} is not installed (pip install 'hbmp-bench[{module}]')"
 
 
 def _peak_rss_mb() -> float:
@@ -262,11 +283,14 @@ def measure_raw_sumo(cfg: BenchConfig, town: str) -> dict:
     try:
         env.reset(seed=0)
         actors = env.world.sim.snapshot()
+        cpu0 = time.process_time()
         seconds = env.world.sim.time_raw_steps(cfg.raw_steps)
+        cpu_seconds = time.process_time() - cpu0  # includes dropping the subscriptions (~1 ms)
     finally:
         env.close()
     return {"town": town, "steps": cfg.raw_steps, "seconds": round(seconds, 4),
-            "steps_per_s": round(cfg.raw_steps / seconds, 1),
+            "steps_per_s": round(cfg.raw_steps / seconds, 1), "cpu_seconds": round(cpu_seconds, 4),
+            "steps_per_cpu_s": round(cfg.raw_steps / max(cpu_seconds, 1e-9), 1),
             "vehicles": int((~actors.is_pedestrian).sum()) + 1, "pedestrians": int(actors.is_pedestrian.sum())}
 
 
@@ -280,7 +304,7 @@ def measure_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float | Non
     agent = load_agent("expert")
     step_length = env.config.step_length_s
     decisions = sim_steps = episodes = 0
-    stepping = resetting = 0.0
+    stepping = resetting = cpu = 0.0
     try:
         t0 = time.perf_counter()
         obs, info = env.reset(seed=0)
@@ -289,9 +313,10 @@ def measure_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float | Non
         with _instrumented(env) as timers:
             while stepping < seconds:
                 action = agent.act(obs, info)  # the agent's time is not the env's
-                t0 = time.perf_counter()
+                t0, c0 = time.perf_counter(), time.process_time()
                 obs, _, terminated, truncated, info = env.step(action)
                 stepping += time.perf_counter() - t0
+                cpu += time.process_time() - c0
                 decisions += 1
                 sim_steps += int(round(info["duration_s"] / step_length))
                 if terminated or truncated:
@@ -307,6 +332,7 @@ def measure_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float | Non
     return {"town": town, "fidelity": fidelity, "seconds": round(stepping, 3), "reset_seconds": round(resetting, 3),
             "warm_up_s": round(warm_up_s, 4), "decisions": decisions, "sim_steps": sim_steps, "episodes_finished": episodes,
             "decisions_per_s": round(decisions / stepping, 2), "sim_steps_per_s": round(sim_steps / stepping, 1),
+            "cpu_seconds": round(cpu, 3), "sim_steps_per_cpu_s": round(sim_steps / max(cpu, 1e-9), 1),
             "latency": latency, "time_share": share}
 
 
@@ -335,14 +361,18 @@ def measure_highway(env_id: str, seconds: float, seed: int = 0) -> dict:
             "sim_steps_per_s": round(decisions * per_decision / stepping, 1)}
 
 
-def _scaling_worker(cfg: BenchConfig, seed: int, barrier, queue) -> None:
+class _ScalingRun:
     """One training-style worker: its own env (own libsumo), random actions for ``scaling_seconds``."""
-    try:
+
+    def __init__(self, cfg: BenchConfig, seed: int):
         warm_up_kernels()
-        env = _make_env(cfg, cfg.scaling_town, cfg.scaling_fidelity)
-        env.action_space.seed(seed)
-        env.reset(seed=seed)
-        barrier.wait()
+        self.cfg, self.seed = cfg, seed
+        self.env = _make_env(cfg, cfg.scaling_town, cfg.scaling_fidelity)
+        self.env.action_space.seed(seed)
+        self.env.reset(seed=seed)
+
+    def run(self) -> dict:
+        env, cfg, seed = self.env, self.cfg, self.seed
         decisions, sim_steps, start = 0, 0, time.perf_counter()
         while time.perf_counter() - start < cfg.scaling_seconds:
             _, _, terminated, truncated, info = env.step(int(env.action_space.sample()))
@@ -352,11 +382,26 @@ def _scaling_worker(cfg: BenchConfig, seed: int, barrier, queue) -> None:
                 env.reset(seed=seed + decisions)
         wall = time.perf_counter() - start
         env.close()
-        queue.put({"seed": seed, "decisions": decisions, "sim_steps": sim_steps, "seconds": round(wall, 3),
-                   "peak_rss_mb": _peak_rss_mb()})
+        return {"seed": seed, "decisions": decisions, "sim_steps": sim_steps, "seconds": round(wall, 3),
+                "peak_rss_mb": _peak_rss_mb()}
+
+
+def _scaling_worker(cfg: BenchConfig, seed: int, barrier, queue) -> None:
+    """A spawned process running one :class:`_ScalingRun`, started behind ``barrier``."""
+    try:
+        run = _ScalingRun(cfg, seed)
+        barrier.wait()
+        queue.put(run.run())
     except BaseException as exc:  # the parent must not wait forever
         barrier.abort()
         queue.put({"seed": seed, "error": repr(exc)})
+
+
+def _scaling_row(cfg: BenchConfig, workers: int, rows: list[dict]) -> dict:
+    return {"workers": workers, "town": cfg.scaling_town, "fidelity": cfg.scaling_fidelity, "actions": "random",
+            "decisions_per_s": round(sum(r["decisions"] / r["seconds"] for r in rows), 2),
+            "sim_steps_per_s": round(sum(r["sim_steps"] / r["seconds"] for r in rows), 1),
+            "peak_rss_mb_per_process": max(r["peak_rss_mb"] for r in rows), "per_worker": rows}
 
 
 def measure_scaling(cfg: BenchConfig, workers: int) -> dict:
@@ -372,10 +417,23 @@ def measure_scaling(cfg: BenchConfig, workers: int) -> dict:
     errors = [r["error"] for r in rows if "error" in r]
     if errors:
         raise RuntimeError(f"scaling worker failed: {errors[0]}")
-    return {"workers": workers, "town": cfg.scaling_town, "fidelity": cfg.scaling_fidelity, "actions": "random",
-            "decisions_per_s": round(sum(r["decisions"] / r["seconds"] for r in rows), 2),
-            "sim_steps_per_s": round(sum(r["sim_steps"] / r["seconds"] for r in rows), 1),
-            "peak_rss_mb_per_process": max(r["peak_rss_mb"] for r in rows), "per_worker": rows}
+    return _scaling_row(cfg, workers, rows)
+
+
+def measure_ray_scaling(cfg: BenchConfig, workers: int) -> dict:
+    """Total decisions/s of ``workers`` Ray actors (a local Ray instance started and shut down here,
+    one CPU each) stepping at the same time: every actor builds its env first, then all run."""
+    import ray
+
+    ray.init(num_cpus=max(workers, 1), include_dashboard=False, log_to_driver=False)
+    try:
+        actor_cls = ray.remote(num_cpus=1, max_restarts=0)(_ScalingRun)
+        actors = [actor_cls.remote(cfg, 1000 + k) for k in range(workers)]
+        ray.get([a.__ray_ready__.remote() for a in actors])
+        rows = ray.get([a.run.remote() for a in actors], timeout=cfg.scaling_seconds + 300)
+    finally:
+        ray.shutdown()
+    return {**_scaling_row(cfg, workers, rows), "backend": "ray"}
 
 
 def measure_import(repeats: int) -> dict:
@@ -405,6 +463,9 @@ def target_checks(result: dict, targets: Targets = Targets()) -> list[dict]:
         add(f"{town} continuous sim steps/s / raw SUMO", row["continuous"]["sim_steps_per_s"] / raw,
             targets.continuous_to_raw)
         add(f"{town} event sim steps/s / raw SUMO", row["event"]["sim_steps_per_s"] / raw, targets.event_to_raw)
+        planner_ms = row["continuous"].get("latency", {}).get("planner", {}).get("mean_ms")
+        if planner_ms is not None:
+            add(f"{town} planner call / raw SUMO step", planner_ms / 1e3 * raw, targets.planner_raw_steps, op="<=")
     fast = result["highway_env"].get("highway-fast-v0")
     if fast:
         for town, row in result["towns"].items():
@@ -416,6 +477,13 @@ def target_checks(result: dict, targets: Targets = Targets()) -> list[dict]:
     if 1 in scaling and 2 in scaling:
         add("2 workers / 1 worker decisions/s", scaling[2]["decisions_per_s"] / scaling[1]["decisions_per_s"],
             targets.two_workers_to_one)
+    on_ray = {row["workers"]: row for row in result.get("ray_scaling", [])}
+    if 1 in on_ray and 2 in on_ray:
+        add("2 Ray actors / 1 actor decisions/s", on_ray[2]["decisions_per_s"] / on_ray[1]["decisions_per_s"],
+            targets.two_ray_actors_to_one)
+    if result["scaling"]:
+        add("peak memory per env process [MB]", max(r["peak_rss_mb_per_process"] for r in result["scaling"]),
+            targets.peak_rss_mb, op="<=")
     if result.get("import"):
         add("import hbmp_bench [s]", result["import"]["import_s"], targets.import_s, op="<=")
     return checks
@@ -429,9 +497,11 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
     jobs = [("raw", t, None) for t in cfg.towns] + [("env", t, f) for t in cfg.towns for f in FIDELITIES]
     jobs += [("highway", None, e) for e in (HIGHWAY_ENVS if cfg.highway_seconds > 0 else ())]
     jobs += [("scaling", None, n) for n in cfg.scaling_workers]
+    ray_missing = _missing("ray") if cfg.ray_workers else ""
+    jobs += [("ray", None, n) for n in (cfg.ray_workers if not ray_missing else ())]
     jobs += [("import", None, cfg.import_repeats)] if cfg.import_repeats else []
     towns: dict[str, dict] = {t: {} for t in cfg.towns}
-    highway, scaling, imported = {}, [], {}
+    highway, scaling, on_ray, imported = {}, [], [], {}
     started = time.perf_counter()
     with tqdm(jobs, unit="run", disable=not progress, file=sys.stderr) as bar:
         for kind, town, what in bar:
@@ -444,6 +514,8 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
                 highway[what] = measure_highway(what, cfg.highway_seconds)
             elif kind == "import":
                 imported = measure_import(what)
+            elif kind == "ray":
+                on_ray.append(measure_ray_scaling(cfg, what))
             else:
                 scaling.append(measure_scaling(cfg, what))
     result = {
@@ -454,14 +526,17 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
         "towns": towns,
         "highway_env": highway,
         "scaling": scaling,
+        "ray_scaling": on_ray,
+        "ray_skipped": ray_missing,
         "import": imported,
         "bench_process_peak_rss_mb": _peak_rss_mb(),
         "wall_s": round(time.perf_counter() - started, 1),
     }
     for row in towns.values():
-        raw = row["raw_sumo"]["steps_per_s"]
+        raw = row["raw_sumo"]
         for f in FIDELITIES:
-            row[f]["ratio_to_raw"] = round(row[f]["sim_steps_per_s"] / raw, 3)
+            row[f]["ratio_to_raw"] = round(row[f]["sim_steps_per_s"] / raw["steps_per_s"], 3)
+            row[f]["cpu_ratio_to_raw"] = round(row[f]["sim_steps_per_cpu_s"] / raw["steps_per_cpu_s"], 3)
     result["targets"] = target_checks(result, cfg.targets)
     return result
 
@@ -472,7 +547,7 @@ def format_table(result: dict) -> str:
     lines = [f"machine: {m['cpu_model']}, {m['cpu_count']} CPUs, {m['platform']}, python {m['python']}, "
              f"SUMO {m['sumo']}, hbmp_bench {m['package_version']}",
              f"scenario: {result['scenario']}", "",
-             f"{'what':44s} {'sim steps/s':>12s} {'decisions/s':>12s} {'ratio':>7s}"]
+             f"{'what':44s} {'sim steps/s':>12s} {'decisions/s':>12s} {'ratio':>7s} {'CPU ratio':>9s}"]
     for town, row in result["towns"].items():
         raw = row["raw_sumo"]
         lines.append(f"{town + ' raw libsumo (' + str(raw['vehicles']) + ' veh, ' + str(raw['pedestrians']) + ' ped)':44s} "
@@ -480,12 +555,15 @@ def format_table(result: dict) -> str:
         for f in FIDELITIES:
             r = row[f]
             lines.append(f"{town + ' env ' + f:44s} {r['sim_steps_per_s']:12.1f} {r['decisions_per_s']:12.1f} "
-                         f"{r['ratio_to_raw']:7.3f}")
+                         f"{r['ratio_to_raw']:7.3f} {r['cpu_ratio_to_raw']:9.3f}")
     for env_id, r in result["highway_env"].items():
         lines.append(f"{'highway-env ' + env_id:44s} {r['sim_steps_per_s']:12.1f} {r['decisions_per_s']:12.1f}")
-    for r in result["scaling"]:
-        lines.append(f"{str(r['workers']) + ' worker(s) ' + r['town'] + ' ' + r['fidelity'] + ' random':44s} "
+    for r in result["scaling"] + result.get("ray_scaling", []):
+        who = " Ray actor(s) " if r.get("backend") == "ray" else " worker(s) "
+        lines.append(f"{str(r['workers']) + who + r['town'] + ' ' + r['fidelity'] + ' random':44s} "
                      f"{r['sim_steps_per_s']:12.1f} {r['decisions_per_s']:12.1f}   peak {r['peak_rss_mb_per_process']} MB/process")
+    if result.get("ray_skipped"):
+        lines.append(f"Ray scaling skipped: {result['ray_skipped']}")
     if result.get("import"):
         lines.append(f"{'import hbmp_bench (fresh interpreter, best of ' + str(len(result['import']['runs_s'])) + ')':44s} "
                      f"{result['import']['import_s']:12.3f} s")

@@ -28,6 +28,7 @@ def test_bench_quick_writes_complete_json(tmp_path, capsys):
         row = town[fidelity]
         assert row["decisions"] > 0 and row["sim_steps"] >= row["decisions"]
         assert row["ratio_to_raw"] == pytest.approx(row["sim_steps_per_s"] / raw["steps_per_s"], abs=1e-3)
+        assert row["cpu_ratio_to_raw"] == pytest.approx(row["sim_steps_per_cpu_s"] / raw["steps_per_cpu_s"], abs=1e-3)
         assert row["latency"]["sumo_step"]["n"] >= row["sim_steps"]
         assert row["latency"]["occupancy"]["n"] >= row["decisions"]
         assert row["warm_up_s"] >= 0
@@ -36,12 +37,15 @@ def test_bench_quick_writes_complete_json(tmp_path, capsys):
     assert town["event"]["latency"]["planner"]["n"] == 0
     assert set(written["highway_env"]) == {"highway-fast-v0", "intersection-v0"}
     assert [r["workers"] for r in written["scaling"]] == [1]
+    assert [(r["workers"], r["backend"]) for r in written["ray_scaling"]] == [(1, "ray")]
+    assert written["ray_scaling"][0]["decisions_per_s"] > 0
     assert written["scaling"][0]["peak_rss_mb_per_process"] > 0
     imported = written["import"]
     assert len(imported["runs_s"]) == BenchConfig.quick().import_repeats and imported["import_s"] == min(imported["runs_s"])
     names = [c["name"] for c in written["targets"]]
     assert "Town01 continuous sim steps/s / raw SUMO" in names and "Town01 event decisions/s / highway-fast-v0" in names
-    assert "import hbmp_bench [s]" in names
+    assert "import hbmp_bench [s]" in names and "Town01 planner call / raw SUMO step" in names
+    assert "peak memory per env process [MB]" in names
     for c in written["targets"]:
         assert c["passed"] == (c["value"] >= c["target"] if c["op"] == ">=" else c["value"] <= c["target"])
     assert "targets:" in format_table(written) and "import hbmp_bench" in format_table(written)
@@ -79,6 +83,22 @@ def test_targets_follow_their_parameters():
     assert "import hbmp_bench [s]" not in {c["name"] for c in target_checks({**_result(), "import": {}})}
 
 
+def test_planner_memory_and_ray_targets():
+    result = _result()
+    result["towns"]["Town01"]["continuous"]["latency"] = {"planner": {"mean_ms": 1.2}}  # 1.2 raw steps of 1 ms
+    result["scaling"] = [{"workers": 1, "decisions_per_s": 10.0, "peak_rss_mb_per_process": 400.0},
+                         {"workers": 2, "decisions_per_s": 19.0, "peak_rss_mb_per_process": 460.0}]
+    result["ray_scaling"] = [{"workers": 1, "decisions_per_s": 10.0}, {"workers": 2, "decisions_per_s": 17.5}]
+    checks = {c["name"]: c for c in target_checks(result)}
+    assert checks["Town01 planner call / raw SUMO step"]["value"] == pytest.approx(1.2)
+    assert checks["Town01 planner call / raw SUMO step"]["passed"]
+    assert checks["2 workers / 1 worker decisions/s"]["passed"]  # 1.9 >= 1.85
+    assert checks["2 Ray actors / 1 actor decisions/s"]["passed"]  # 1.75 >= 1.7
+    assert not checks["peak memory per env process [MB]"]["passed"]  # 460 > 450
+    strict = {c["name"]: c["passed"] for c in target_checks(result, Targets(planner_raw_steps=1.0))}
+    assert not strict["Town01 planner call / raw SUMO step"]
+
+
 def test_exit_code_is_one_only_with_check_and_a_failed_target():
     ok, failed = target_checks(_result()), target_checks(_result(), Targets(import_s=0.0))
     assert exit_code({"targets": ok}, check=False) == 0 and exit_code({"targets": ok}, check=True) == 0
@@ -88,7 +108,7 @@ def test_exit_code_is_one_only_with_check_and_a_failed_target():
 @pytest.mark.slow
 def test_bench_check_exits_1_on_a_failed_target_and_0_without_check(monkeypatch, capsys):
     tiny = BenchConfig(towns=("Town01",), raw_steps=20, env_seconds=0.2, highway_seconds=0.0, scaling_workers=(),
-                       import_repeats=1, targets=Targets(import_s=0.0))  # no import takes 0 s: that target fails
+                       ray_workers=(), import_repeats=1, targets=Targets(import_s=0.0))  # no import takes 0 s: that target fails
     monkeypatch.setattr(BenchConfig, "quick", classmethod(lambda cls: tiny))
     assert main(["bench", "--quick", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)

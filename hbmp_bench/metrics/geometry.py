@@ -91,11 +91,63 @@ def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
     return (np.sum(crosses & (x < x_at), axis=1) % 2) == 1
 
 
+class SegmentGrid:
+    """A uniform grid over boxes, built once: which boxes may meet a query box (a spatial index).
+
+    Args:
+        lo, hi: (M, 2) lower-left and upper-right corners of M boxes [m].
+        cell_m: side of a grid cell [m].
+
+    :meth:`query` returns, in ascending order, every box whose cells meet the query box's cells: a
+    superset of the boxes that overlap it (the caller tests those exactly), found in time that does
+    not grow with the map.
+    """
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, cell_m: float = 16.0):
+        if not cell_m > 0:
+            raise ValueError(f"cell_m must be > 0, got {cell_m!r}")
+        self.cell_m = float(cell_m)
+        self.origin = lo.min(axis=0) if len(lo) else np.zeros(2)
+        c_lo = self._cell(lo)
+        c_hi = self._cell(hi)
+        self.shape = (c_hi.max(axis=0) + 1) if len(lo) else np.ones(2, dtype=np.intp)
+        cells, items = [], []
+        for k in range(len(lo)):
+            cx, cy = np.meshgrid(np.arange(c_lo[k, 0], c_hi[k, 0] + 1), np.arange(c_lo[k, 1], c_hi[k, 1] + 1))
+            cells.append((cx * self.shape[1] + cy).ravel())
+            items.append(np.full(cx.size, k))
+        cells = np.concatenate(cells) if cells else np.zeros(0, dtype=np.intp)
+        items = np.concatenate(items) if items else np.zeros(0, dtype=np.intp)
+        order = np.lexsort((items, cells))
+        self.items = items[order]
+        self.starts = np.searchsorted(cells[order], np.arange(int(np.prod(self.shape)) + 1))
+
+    def _cell(self, xy: np.ndarray) -> np.ndarray:
+        return np.floor((xy - self.origin) / self.cell_m).astype(np.intp)  # as math.floor in query
+
+    def query(self, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """Indices (ascending, unique) of the boxes whose cells meet the box ``lo``–``hi`` (2,) [m]."""
+        ox, oy, cell = self.origin[0], self.origin[1], self.cell_m
+        nx, ny = int(self.shape[0]), int(self.shape[1])
+        x0 = max(math.floor((lo[0] - ox) / cell), 0)
+        y0 = max(math.floor((lo[1] - oy) / cell), 0)
+        x1 = min(math.floor((hi[0] - ox) / cell), nx - 1)
+        y1 = min(math.floor((hi[1] - oy) / cell), ny - 1)
+        if x1 < x0 or y1 < y0:
+            return self.items[:0]
+        starts = self.starts
+        if x0 == x1 and y0 == y1:  # the usual case for a footprint: one cell, already sorted
+            return self.items[starts[x0 * ny + y0]:starts[x0 * ny + y0 + 1]]
+        parts = [self.items[starts[cx * ny + y0]:starts[cx * ny + y1 + 1]] for cx in range(x0, x1 + 1)]
+        return np.unique(np.concatenate(parts))
+
+
 class LaneLocator:
     """Which drivable lane (and which way it runs) lies under given points.
 
     Built once per network: every segment of every normal drivable lane with its half width and
-    unit direction, plus junction polygons (where internal lanes run); stop lines on demand.
+    unit direction in a :class:`SegmentGrid`, plus junction polygons (where internal lanes run);
+    stop lines on demand.
     """
 
     def __init__(self, net: RoadNetwork):
@@ -121,6 +173,7 @@ class LaneLocator:
         self.hi = np.maximum(self.a, self.b) + self.half_width[:, None]
         self._bounds = np.ascontiguousarray(np.concatenate([self.hi, -self.lo], axis=1))
         """(M, 4) [hi_x, hi_y, -lo_x, -lo_y]: one comparison culls the segments far from the points."""
+        self._grid = SegmentGrid(self.lo, self.hi)
         self.lane_edge = np.array([net.lanes[n].edge for n in names])
         self.junctions = list(net.junction_shapes.values())
         self.junction_lo = np.array([j.min(0) for j in self.junctions]).reshape(-1, 2)
@@ -160,15 +213,16 @@ class LaneLocator:
         A point on a lane of ``prefer_edge`` (the ego's own edge) is assigned to it even where another
         lane lies under it in plan view (a ramp bridging a carriageway)."""
         p_lo, p_hi = points.min(0), points.max(0)
-        near = np.nonzero((self._bounds >= np.concatenate([p_lo, -p_hi])).all(axis=1))[0]
+        candidates = self._grid.query(p_lo, p_hi)
+        near = candidates[(self._bounds[candidates] >= np.concatenate([p_lo, -p_hi])).all(axis=1)]
         lane = np.full(len(points), -1)
         direction = np.zeros((len(points), 2))
         if len(near):
             a, u, L = self.a[near], self.unit[near], self.seg_len[near]
-            rel = points[:, None, :] - a[None]
-            t = np.clip(np.einsum("pmk,mk->pm", rel, u), 0.0, L)
-            closest = a[None] + t[..., None] * u[None]
-            dist = np.hypot(*(points[:, None, :] - closest).transpose(2, 0, 1))
+            px, py = points[:, 0:1], points[:, 1:2]
+            t = (px - a[:, 0]) * u[:, 0] + (py - a[:, 1]) * u[:, 1]  # (P, M) along each segment
+            np.minimum(np.maximum(t, 0.0, out=t), L, out=t)
+            dist = np.hypot(px - (a[:, 0] + t * u[:, 0]), py - (a[:, 1] + t * u[:, 1]))
             inside = dist <= self.half_width[near][None]
             if prefer_edge:
                 own = inside & self.segment_is_edge(near, prefer_edge)[None]

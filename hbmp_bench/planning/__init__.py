@@ -6,7 +6,8 @@ Modules:
     behaviors  -- :class:`Behavior` enum and the reference-speed rule.
     state      -- :class:`VehicleState`, :class:`Obstacles`.
     planner    -- sampling planner :func:`plan` with the paper's costs.
-    rollout    -- its closed-loop roll-out, the one loop compiled with numba.
+    rollout    -- its closed-loop roll-out, compiled with numba.
+    obstacle_kernels -- its obstacle cost and collision check, compiled with numba.
     vehicle    -- kinematic bicycle model with actuator limits.
     tracking   -- PID speed + pure-pursuit steering tracker.
     executor   -- :class:`BehaviorExecutor` (replan + track until the behavior ends).

@@ -86,7 +86,7 @@ class Path:
 
     __slots__ = (
         "xy", "s", "heading", "kappa",
-        "_x0", "_y0", "_tx", "_ty", "_seg_len", "_lo", "_hi", "_dh", "_dk",
+        "_x0", "_y0", "_tx", "_ty", "_seg_len", "_lo", "_hi", "_dh", "_dk", "_uniform",
     )
 
     def __init__(self, xy, *, s_start: float = 0.0, smooth: int = 2, min_spacing: float = 1e-3,
@@ -152,6 +152,7 @@ class Path:
         self._dk = _readonly(np.diff(kappa))
         self._x0 = _readonly(xy[:-1, 0])
         self._y0 = _readonly(xy[:-1, 1])
+        self._uniform: UniformSegments | None = None
 
     @classmethod
     def _from_arrays(cls, xy, s, heading, kappa) -> Path:
@@ -304,16 +305,20 @@ class Path:
                 ``resample(..., extrapolate=True)`` over the whole region points can reach:
                 the roll-out's projection does not extend the ends).
         """
+        cached = getattr(self, "_uniform", None)
+        if cached is not None:  # the path is immutable: computed once
+            return cached
         step = np.diff(self.s)
         ds = float(np.mean(step))
         if np.ptp(step) > 1e-6 * ds:
             raise ValueError("uniform_segments needs a path resampled at uniform arc-length steps")
         # Resampling a kinked polyline keeps s uniform, but chords across a kink are shorter
         # than ds: clip along each chord and convert chord metres to arc length per segment.
-        return UniformSegments(
+        self._uniform = UniformSegments(
             x0=self._x0, y0=self._y0, tx=self._tx, ty=self._ty, chord=self._seg_len,
             s=self.s[:-1], s_per_m=step / self._seg_len, heading=self.heading[:-1],
             kappa=self.kappa[:-1], dh=self._dh, dk=self._dk, inv_ds=1.0 / ds)
+        return self._uniform
 
     def frenet(self, xy, hint_s=None, window: tuple[float, float] = (10.0, 40.0)):
         """Arc length and signed lateral offset of points.

@@ -54,7 +54,12 @@ Collision check: ego footprint (``length`` x ``width`` inflated by ``safety_marg
 each side) against obstacle footprints (oriented rectangles, Cartesian constant-velocity
 prediction along their heading) at every future step: bounding-circle broad phases
 (per-step sample bounding box, then per sample) followed by an exact separating-axis test
-on the candidate pairs. A sample that touches an obstacle is infeasible. The cheapest
+on the candidate pairs. A sample that touches an obstacle is infeasible.
+
+The obstacle stage (``c_obs`` and the collision check) runs compiled
+(:mod:`.obstacle_kernels`); :func:`obstacle_cost_reference` and :func:`collisions_reference` are
+its numpy form, which the tests hold it to: the same collisions, ``c_obs`` within 5e-6
+relative (the reference sums in float32), the same chosen trajectory on recorded problems. The cheapest
 feasible sample is chosen (ties within ``tie_tolerance`` go to the sample nearest the
 nominal one); if none is feasible, ``collision_free`` is False and the chosen sample is the cheapest one
 (``infeasible_fallback="min_cost"``, default) or the full brake (``"brake"``); the full
@@ -63,8 +68,10 @@ brake index is always reported in :attr:`PlanResult.brake_index`.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -297,6 +304,34 @@ def _spread(lo: float, hi: float, n: int) -> np.ndarray:
     return np.zeros(1) if n == 1 else np.linspace(lo, hi, n)
 
 
+class _Layout(NamedTuple):
+    """What every :func:`plan` call with one config shares (read-only arrays, built once per config)."""
+
+    times: np.ndarray  # (T,) [s]
+    dv: np.ndarray  # (n_v,) offsets of v(0) from the speed [m/s]
+    dw: np.ndarray  # (n_omega,) offsets of omega(0) from omega_nom [rad/s]
+    dec: np.ndarray  # (S,) deceleration of each sample's speed profile [m/s^2]
+    t2: np.ndarray  # (T - 1,) squared future times [s^2]
+    hold: int  # steps the omega(0) offset is held
+
+
+@functools.lru_cache(maxsize=16)
+def _layout(cfg: PlannerConfig) -> _Layout:
+    n_grid = cfg.n_v * cfg.n_omega
+    times = np.arange(cfg.n_steps + 1) * cfg.dt
+    layout = _Layout(
+        times=times,
+        dv=_spread(-cfg.decel * cfg.v_window_time, cfg.accel * cfg.v_window_time, cfg.n_v),
+        dw=_spread(-cfg.omega_spread, cfg.omega_spread, cfg.n_omega),
+        dec=np.concatenate([np.full(n_grid, cfg.decel), [cfg.decel, cfg.brake_decel]]),
+        t2=times[1:] ** 2,
+        hold=max(1, round(cfg.omega_hold / cfg.dt)),
+    )
+    for a in layout[:-1]:
+        a.setflags(write=False)
+    return layout
+
+
 def _sat_overlap(dx, dy, ce, se, hl_e, hw_e, co, so, hl_o, hw_o):
     """Separating-axis test of oriented rectangles (all arrays (P,)); True = overlap.
 
@@ -312,8 +347,11 @@ def _sat_overlap(dx, dy, ce, se, hl_e, hw_e, co, so, hl_o, hw_o):
     return ~sep
 
 
-def _collisions(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndarray:
+def collisions_reference(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndarray:
     """(S,) True where a sample's footprint meets an obstacle at any step of ``times``.
+
+    The numpy reference of the compiled :func:`.obstacle_kernels.collisions` that :func:`plan`
+    uses (the tests hold the two to the same booleans).
 
     ``X, Y, PSI``: (T, S) ego poses (time-major) at ``times`` (T,). Broad phase 1:
     obstacle bounding circles against the per-step bounding box of all samples, (K, T);
@@ -354,8 +392,12 @@ def _collisions(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndar
 OBS_EXPONENT_CUTOFF = 10.0
 
 
-def _obstacle_cost(SS, EE, obs: Obstacles, lp: Path, times, cfg: PlannerConfig) -> np.ndarray:
-    """(S,) ``c_obs`` from sample Frenet coordinates ``SS, EE`` (T, S) at ``times`` (T,)."""
+def obstacle_cost_reference(SS, EE, obs: Obstacles, lp: Path, times, cfg: PlannerConfig) -> np.ndarray:
+    """(S,) ``c_obs`` from sample Frenet coordinates ``SS, EE`` (T, S) at ``times`` (T,).
+
+    The numpy reference of :func:`_obstacle_cost` (which runs the compiled
+    :func:`.obstacle_kernels.obstacle_cost`); it sums in float32, the kernel in float64.
+    """
     T, S = SS.shape
     if len(obs) == 0:
         return np.zeros(S)
@@ -382,6 +424,37 @@ def _obstacle_cost(SS, EE, obs: Obstacles, lp: Path, times, cfg: PlannerConfig) 
     g *= np.float32(-1.0 / cfg.sigma_obs)
     np.exp(g, out=g)
     return g.sum(axis=0, dtype=np.float64) / T
+
+
+def _obstacle_cost(SS, EE, obs: Obstacles, lp: Path, times, cfg: PlannerConfig) -> np.ndarray:
+    """(S,) ``c_obs`` of samples at Frenet coordinates ``SS, EE`` (T, S) at ``times`` (T,) on the
+    uniformly resampled reference ``lp`` (compiled: :func:`.obstacle_kernels.obstacle_cost`;
+    numpy reference: :func:`obstacle_cost_reference`)."""
+    from .obstacle_kernels import obstacle_cost, project_poses
+
+    if len(obs) == 0:
+        return np.zeros(SS.shape[1])
+    # Obstacles holds C-contiguous float64 arrays: with these the kernels keep one compiled signature
+    seg = lp.uniform_segments()
+    so0, eo0, tho = project_poses(obs.x, obs.y, obs.yaw, seg.x0, seg.y0, seg.tx, seg.ty, seg.chord, seg.s,
+                                  seg.heading, seg.dh)
+    return obstacle_cost(np.ascontiguousarray(SS), np.ascontiguousarray(EE), so0, eo0, tho, obs.v, obs.length,
+                         obs.width, np.ascontiguousarray(times, dtype=np.float64), float(cfg.length),
+                         float(cfg.width), float(cfg.kappa_obs), float(cfg.sigma_obs), OBS_EXPONENT_CUTOFF)
+
+
+def _collisions(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndarray:
+    """(S,) True where a sample's footprint (``X, Y, PSI`` (T, S) at ``times`` (T,)) meets an
+    obstacle (compiled: :func:`.obstacle_kernels.collisions`; numpy reference:
+    :func:`collisions_reference`)."""
+    from .obstacle_kernels import collisions
+
+    if len(obs) == 0:
+        return np.zeros(X.shape[1], dtype=bool)
+    return collisions(np.ascontiguousarray(X), np.ascontiguousarray(Y), np.ascontiguousarray(PSI),
+                      obs.x, obs.y, obs.yaw, obs.v, obs.length, obs.width,
+                      np.ascontiguousarray(times, dtype=np.float64), 0.5 * cfg.length + cfg.safety_margin,
+                      0.5 * cfg.width + cfg.safety_margin)
 
 
 def instant_costs(path: Path, ego: VehicleState, obstacles: Obstacles,
@@ -433,27 +506,26 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
     """Sample, roll out, score and choose a trajectory (see the module docstring)."""
     cfg = PlannerConfig() if cfg is None else cfg
     ego, path = problem.ego, problem.path
-    n, dt = cfg.n_steps, cfg.dt
-    times = np.arange(n + 1) * dt
+    dt = cfg.dt
+    layout = _layout(cfg)
+    times = layout.times
     s0, e0, th0, k0 = path.project(ego.xy, ego.yaw, hint_s=problem.s_hint)
     v_ref = min(problem.v_ref, curve_speed_cap(path, s0, ego.v, cfg))
 
     # ---- samples of v(0), omega(0) and the two braking samples
     v = ego.v
     v_hi = max(v, problem.speed_limit)
-    v0 = np.clip(v + _spread(-cfg.decel * cfg.v_window_time, cfg.accel * cfg.v_window_time,
-                             cfg.n_v), 0.0, v_hi)
+    v0 = np.clip(v + layout.dv, 0.0, v_hi)
     lim0 = float(omega_limit(v, cfg.yaw_rate_max, cfg.max_curvature, cfg.lat_accel_max))
     g0 = min(1.0, cfg.gain_speed / max(abs(v), 1e-9))
     w_nom = float(np.clip(control_law(v, k0, e0, th0, cfg.k_theta * g0, cfg.k_e * g0 * g0),
                           -lim0, lim0))
-    w0 = w_nom + _spread(-cfg.omega_spread, cfg.omega_spread, cfg.n_omega)
+    w0 = w_nom + layout.dw
     n_grid = cfg.n_v * cfg.n_omega
     V0 = np.concatenate([np.repeat(v0, cfg.n_omega), [v, v]])
     W0 = np.concatenate([np.tile(w0, cfg.n_v), [w_nom, w_nom]])
     v_tgt = np.concatenate([np.full(n_grid, v_ref), [0.0, 0.0]])
-    dec = np.concatenate([np.full(n_grid, cfg.decel), [cfg.decel, cfg.brake_decel]])
-    V = linear_speed_profile(V0, v_tgt, times, cfg.accel, dec)  # (S, T)
+    V = linear_speed_profile(V0, v_tgt, times, cfg.accel, layout.dec)  # (S, T)
     # normalised distance of each sample from the nominal one (tie-breaking only)
     dev = (np.abs(W0 - w_nom) / max(cfg.omega_spread, 1e-9)
            + np.abs(V0 - v) / max((cfg.accel + cfg.decel) * cfg.v_window_time, 1e-9))
@@ -474,7 +546,7 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
     # ---- roll-out (compiled: sequential in time, see .rollout; numba loads on the first call)
     from .rollout import roll_out
 
-    hold = max(1, round(cfg.omega_hold / dt))
+    hold = layout.hold
     X, Y, PSI, SS, EE, W = roll_out(  # floats, whatever the caller gave: one compiled signature
         float(ego.x), float(ego.y), float(ego.yaw), float(s0), float(e0), float(th0), float(k0),
         np.ascontiguousarray(V.T), KTH, KE, np.ascontiguousarray(lim.T), W0 - w_nom, int(hold), float(dt),
@@ -482,17 +554,18 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
         *lp.uniform_segments())  # (T, S) time-major
 
     # ---- costs
-    t2 = times[1:] ** 2
+    t2 = layout.t2
     Vf = V[:, 1:]
     c_vel = (np.abs(v_ref - Vf) @ t2) / t2.sum()
     c_dist = 1.0 / (1.0 + np.abs(Vf).sum(axis=1))
     obs = problem.obstacles
-    c_obs = _obstacle_cost(SS[1:], EE[1:], obs, lp, times[1:], cfg)
+    future = times[1:]
+    c_obs = _obstacle_cost(SS[1:], EE[1:], obs, lp, future, cfg)
     costs = np.stack([c_vel, c_dist, c_obs], axis=1)
     total = cfg.w_velocity * c_vel + cfg.w_dist * c_dist + cfg.w_obs * c_obs
 
     # ---- feasibility and choice
-    feasible = ~_collisions(X[1:], Y[1:], PSI[1:], obs, times[1:], cfg)
+    feasible = ~_collisions(X[1:], Y[1:], PSI[1:], obs, future, cfg)
     brake_index = S - 1
     if feasible.any() or cfg.infeasible_fallback == "min_cost":
         cand = np.where(feasible, total, np.inf) if feasible.any() else total
@@ -516,7 +589,8 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
 
 
 def compile_kernels(cfg: PlannerConfig | None = None) -> None:
-    """Compile the roll-out (or load it from numba's on-disk cache) before :func:`plan` is timed.
+    """Compile the roll-out and the obstacle kernels (or load them from numba's on-disk cache)
+    before :func:`plan` is timed.
 
     One :func:`plan` on a straight road with one obstacle: ``plan`` passes the roll-out the same
     argument types whatever the problem, so this compiles the one signature every later call

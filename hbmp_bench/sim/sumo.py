@@ -280,24 +280,27 @@ class SumoSim:
 
     def snapshot(self) -> Actors:
         """All inserted vehicles and pedestrians now (footprint centres)."""
-        results = []
-        for getter in (libsumo.vehicle.getAllSubscriptionResults, libsumo.person.getAllSubscriptionResults):
-            results.extend(getter().items())
-        k = len(results)
-        ids = tuple(r[0] for r in results)
+        vehicles = libsumo.vehicle.getAllSubscriptionResults()
+        persons = libsumo.person.getAllSubscriptionResults()
+        ids = (*vehicles, *persons)
+        k = len(ids)
         pos_, angle_, speed_ = tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED
-        rows = np.array([(*v[pos_], v[angle_], v[speed_]) for _, v in results], dtype=float).reshape(k, 4)
+        rows = np.array([(*v[pos_], v[angle_], v[speed_]) for group in (vehicles, persons) for v in group.values()],
+                        dtype=float).reshape(k, 4)
         pos, yaw, speed = rows[:, :2], sumo_angle_to_yaw(rows[:, 2]), rows[:, 3]
         if self._snapshot_dims is None or self._snapshot_dims[0] != ids:  # actors rarely change: cache
             dims = np.array([self._dims.get(i, (4.5, 1.8, False)) for i in ids], dtype=float).reshape(k, 3)
             cached = (dims[:, 0].copy(), dims[:, 1].copy(), dims[:, 2].astype(bool))
-            for a in cached:
+            to_centre = np.where(cached[2], 0.0, cached[0] / 2)[:, None]  # front bumper -> centre [m]
+            for a in (*cached, to_centre):
                 a.setflags(write=False)  # shared by the snapshots that follow
-            self._snapshot_dims = (ids, *cached)
-        _, length, width, is_ped = self._snapshot_dims
-        heading = np.stack([np.cos(yaw), np.sin(yaw)], axis=1)
-        centre = pos - np.where(is_ped, 0.0, length / 2)[:, None] * heading
-        return Actors(ids, centre, yaw, speed, length, width, is_ped)
+            self._snapshot_dims = (ids, *cached, to_centre)
+        _, length, width, is_ped, to_centre = self._snapshot_dims
+        heading = np.empty((k, 2))
+        np.cos(yaw, out=heading[:, 0])
+        np.sin(yaw, out=heading[:, 1])
+        heading *= to_centre
+        return Actors(ids, np.subtract(pos, heading, out=heading), yaw, speed, length, width, is_ped)
 
     def vehicle_state(self, vehicle_id: str) -> VehicleState | None:
         """Pose and lane of a subscribed vehicle with lane variables (the ego), None if absent."""

@@ -33,7 +33,9 @@ def _command_line(args: argparse.Namespace) -> str:
     parts = ["hbmp-bench", "train", args.kind, "--scenario", args.scenario, "--episodes", str(args.episodes),
              "--workers", str(args.workers), "--seed", str(args.seed), "--out", args.out]
     for flag, value in (("--fidelity", args.fidelity), ("--observation", args.observation),
-                        ("--density", args.density), ("--init", args.init), ("--resume", args.resume)):
+                        ("--density", args.density), ("--init", args.init), ("--resume", args.resume),
+                        ("--backend", None if args.backend == "process" else args.backend),
+                        ("--address", args.address)):
         if value is not None:
             parts += [flag, value]
     if args.mask_actions:
@@ -84,7 +86,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     init = resolve_init(kind, args.init) if args.resume is None else None
     env_config = WorkerEnvConfig(env_id=args.scenario, env_kwargs=env_kwargs, entry_point=entry_point,
                                  reward=REWARD[kind])
-    run = RunConfig(kind=kind, episodes=args.episodes, out=args.out, workers=args.workers, seed=args.seed,
+    run = RunConfig(kind=kind, episodes=args.episodes, out=args.out, workers=args.workers, backend=args.backend,
+                    address=args.address, seed=args.seed,
                     save_every=args.save_every, resume=args.resume, command=_command_line(args),
                     progress=not args.no_progress)
     try:
@@ -143,6 +146,10 @@ def add_commands(subparsers) -> None:
     p.add_argument("--episodes", type=int, default=None,
                    help="episode budget (default: il 3000, others 6000 as in the paper)")
     p.add_argument("--workers", type=int, default=2, help="environment processes (one SUMO each)")
+    p.add_argument("--backend", choices=("process", "ray"), default="process",
+                   help="where the environment workers run: local processes (default) or Ray actors")
+    p.add_argument("--address", default=None,
+                   help="with --backend ray: the cluster (ray://HEAD:10001 or auto); default: a local Ray instance")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default=None, help="run folder (default: runs/<kind>__<scenario>__<seed>__<time>)")
     p.add_argument("--init", default=None,

@@ -209,9 +209,7 @@ def train_dagger(run: RunConfig, env_config: WorkerEnvConfig, dagger: DaggerConf
     torch.set_num_threads(run.threads())
     rng = np.random.default_rng([run.seed, progress.episodes])
 
-    from hbmp_bench.training.vec_env import SubprocVecEnv
-
-    env = SubprocVecEnv(env_config, run.workers, seed=run.seed * 1_000_003 + progress.episodes)
+    env = run.vec_env(env_config, seed=run.seed * 1_000_003 + progress.episodes)
     logs: list[CsvLog] = []
     bar = None
     try:
@@ -234,7 +232,8 @@ def train_dagger(run: RunConfig, env_config: WorkerEnvConfig, dagger: DaggerConf
                 with np.load(data_path) as arrays:
                     train_set.load_state_dict(arrays, "train")
                     holdout.load_state_dict(arrays, "holdout")
-        options = {"kind": "il", "workers": run.workers, **{f"env.{k}": v for k, v in info["env"].items()},
+        options = {"kind": "il", "workers": run.workers, "backend": run.backend,
+                   **{f"env.{k}": v for k, v in info["env"].items()},
                    **{f"dagger.{k}": v for k, v in dataclasses.asdict(dagger).items()}}
 
         def checkpoint() -> dict[str, Any]:

@@ -1,8 +1,9 @@
 """PPO with rsl-rl for the behavior policy (hbmp, hbmp-s) and the flat control baseline.
 
 rsl-rl's ``OnPolicyRunner`` and ``PPO`` do the learning; this module supplies the environment
-(:class:`~hbmp_bench.training.vec_env.SubprocVecEnv`), the paper's network and hyper-parameters,
-and the bookkeeping of a run (episode CSV, checkpoints, resume, curves, model card).
+(:class:`~hbmp_bench.training.vec_env.SubprocVecEnv`, or Ray actors:
+:class:`~hbmp_bench.training.vec_env.RayVecEnv`), the paper's network and hyper-parameters, and the
+bookkeeping of a run (episode CSV, checkpoints, resume, curves, model card).
 
 Deviations from the paper, and why:
 - Two learning rates. rsl-rl's PPO has one optimizer; :class:`TwoRatePPO` gives it two Adam
@@ -200,9 +201,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig, init:
 
     from rsl_rl.runners import OnPolicyRunner
 
-    from hbmp_bench.training.vec_env import SubprocVecEnv
-
-    env = SubprocVecEnv(env_config, run.workers, seed=run.seed * 1_000_003 + progress.episodes)
+    env = run.vec_env(env_config, seed=run.seed * 1_000_003 + progress.episodes)
     log = bar = None
     try:
         from gymnasium import spaces
@@ -222,7 +221,8 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig, init:
         elif init_ckpt is not None:
             check_init_compatible(init_ckpt, info)
             alg.get_policy().load_state_dict(init_ckpt["actor_state_dict"])
-        options = {"kind": run.kind, "workers": run.workers, "init": (init_label or init) if resume is None else None,
+        options = {"kind": run.kind, "workers": run.workers, "backend": run.backend,
+                   "init": (init_label or init) if resume is None else None,
                    **{f"env.{k}": v for k, v in info["env"].items()}, "reward": env_config.reward,
                    **{f"ppo.{k}": v for k, v in dataclasses.asdict(ppo).items()}}
         if resume is not None:

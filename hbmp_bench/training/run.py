@@ -21,6 +21,9 @@ import numpy as np
 
 from hbmp_bench.training.checkpoints import KINDS
 
+BACKENDS = ("process", "ray")
+"""Where training workers run: local processes over pipes, or Ray actors (a local instance or a cluster)."""
+
 
 @dataclass(frozen=True)
 class RunConfig:
@@ -31,6 +34,8 @@ class RunConfig:
         episodes: episode budget of this run (total, counting episodes before a resume).
         out: run folder.
         workers: environment worker processes (one libsumo simulation each).
+        backend: where the workers run: ``process`` (local processes) or ``ray`` (Ray actors).
+        address: the Ray cluster (``ray://HEAD:10001``, ``auto``); None: a local Ray instance.
         seed: seeds torch, the workers' environments and DAgger's mixing.
         save_every: write ``checkpoint.pt`` every this many finished episodes.
         resume: a ``checkpoint.pt`` to continue from (its kind must match).
@@ -43,6 +48,8 @@ class RunConfig:
     episodes: int
     out: str
     workers: int = 2
+    backend: str = "process"
+    address: str | None = None
     seed: int = 0
     save_every: int = 50
     resume: str | None = None
@@ -59,6 +66,12 @@ class RunConfig:
             raise ValueError(f"episodes must be >= 1, got {self.episodes}")
         if self.workers < 1:
             raise ValueError(f"workers must be >= 1, got {self.workers}")
+        if self.backend not in BACKENDS:
+            from hbmp_bench.errors import UnknownNameError
+
+            raise UnknownNameError("training backend", self.backend, BACKENDS)
+        if self.address is not None and self.backend != "ray":
+            raise ValueError("address is for the ray backend only (--backend ray)")
         if self.save_every < 1:
             raise ValueError(f"save_every must be >= 1, got {self.save_every}")
 
@@ -68,7 +81,14 @@ class RunConfig:
     def threads(self) -> int:
         if self.torch_threads is not None:
             return max(1, self.torch_threads)
-        return max(1, (os.cpu_count() or 1) - self.workers)
+        local_workers = 0 if self.address is not None else self.workers  # a cluster's actors run elsewhere
+        return max(1, (os.cpu_count() or 1) - local_workers)
+
+    def vec_env(self, env_config, seed: int):
+        """The training ``VecEnv`` of this run's backend, ``workers`` environments."""
+        from hbmp_bench.training.vec_env import make_vec_env
+
+        return make_vec_env(env_config, self.workers, seed=seed, backend=self.backend, address=self.address)
 
 
 @dataclass

@@ -1,4 +1,10 @@
-"""rsl-rl ``VecEnv`` over worker processes, one environment (one libsumo simulation) per worker.
+"""rsl-rl ``VecEnv`` over workers, one environment (one libsumo simulation) per worker process.
+
+Two transports behind the same ``VecEnv``: :class:`SubprocVecEnv` (local processes over pipes, the
+default) and :class:`RayVecEnv` (Ray actors, one per environment, on a local Ray instance or a
+cluster: ``hbmp-bench train ... --backend ray --address ray://HEAD:10001``). Both run
+:class:`~hbmp_bench.training.worker.EnvRunner` in the worker, so the same seeds give the same
+observations; :func:`make_vec_env` picks one by name.
 
 Observations come back as a ``TensorDict`` with batch size ``(num_envs,)`` and one group per key
 of the environment's observation dict, plus the action mask:
@@ -25,7 +31,8 @@ from gymnasium import spaces
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
-from hbmp_bench.training.worker import StepReply, WorkerEnvConfig, make_env, run_worker
+from hbmp_bench.training.run import BACKENDS
+from hbmp_bench.training.worker import EnvActor, StepReply, WorkerEnvConfig, make_env, run_worker
 
 MAX_EPISODE_DECISIONS = 1_000_000
 """``max_episode_length`` reported to rsl-rl: episodes end by the env's own timeout, not here."""
@@ -35,29 +42,29 @@ class WorkerError(RuntimeError):
     """A worker process failed, died or stopped answering."""
 
 
-class SubprocVecEnv(VecEnv):
-    """``num_envs`` environments, each in its own process.
+class WorkerVecEnv(VecEnv):
+    """The ``VecEnv`` shared by every transport: ``num_envs`` environments, each in its own process.
 
     Args:
         config: how each worker builds its environment (id, options, reward mode, expert labels).
-        num_envs: number of worker processes (>= 1).
+        num_envs: number of workers (>= 1).
         seed: base seed; worker ``i`` starts with the seed ``SeedSequence([seed, i])`` gives, later
             episodes follow from the env's own generator, so a run is reproducible.
         device: torch device of the returned tensors.
-        start_method: ``spawn`` (default) or ``forkserver``; never ``fork`` (libsumo, torch threads).
         reply_timeout_s: a worker that does not answer a step within this time is an error [s].
+
+    Subclasses start the workers (:meth:`_start`), carry one request to every worker and bring
+    back the replies in order (:meth:`_request_all`), and stop them (:meth:`close`).
 
     Attributes (besides rsl-rl's): ``observation_space``, ``action_space`` (of one env),
     ``episodes_done`` (finished episodes so far).
     """
 
     def __init__(self, config: WorkerEnvConfig, num_envs: int, seed: int = 0, device: str = "cpu",
-                 start_method: str = "spawn", reply_timeout_s: float = 300.0):
+                 reply_timeout_s: float = 300.0):
         if num_envs < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
-        if start_method not in ("spawn", "forkserver"):
-            raise ValueError(f"start_method must be 'spawn' or 'forkserver', got {start_method!r}")
-        probe = make_env(config)  # validates the id and options here, before any process starts
+        probe = make_env(config)  # validates the id and options here, before any worker starts
         try:
             self.observation_space = probe.observation_space
             self.action_space = probe.action_space
@@ -79,39 +86,27 @@ class SubprocVecEnv(VecEnv):
         self.episodes_done = 0
         self._finished: list[tuple[int, dict[str, Any]]] = []
         self._closed = False
-        context = mp.get_context(start_method)
-        self._conns, self._procs = [], []
         try:
-            for i in range(num_envs):
-                parent, child = context.Pipe()
-                proc = context.Process(target=run_worker, args=(child, config), name=f"hbmp-env-{i}", daemon=True)
-                proc.start()
-                child.close()
-                self._conns.append(parent)
-                self._procs.append(proc)
-            for i, conn in enumerate(self._conns):
-                conn.send(("reset", int(np.random.SeedSequence([seed, i]).generate_state(1)[0])))
-            self._replies = [self._receive(i) for i in range(num_envs)]
+            self._start()
+            seeds = [int(np.random.SeedSequence([seed, i]).generate_state(1)[0]) for i in range(num_envs)]
+            self._replies = self._request_all("reset", seeds)
         except BaseException:
             self.close()
             raise
         self._obs = self._stack_obs(self._replies)
 
-    # ------------------------------------------------------------ protocol
-    def _receive(self, i: int) -> StepReply:
-        conn, proc = self._conns[i], self._procs[i]
-        try:
-            if not conn.poll(self.reply_timeout_s):
-                raise WorkerError(f"training worker {i} (pid {proc.pid}) did not answer within "
-                                  f"{self.reply_timeout_s:.0f} s")
-            status, payload = conn.recv()
-        except (EOFError, ConnectionResetError, BrokenPipeError) as exc:
-            proc.join(timeout=1.0)
-            raise WorkerError(f"training worker {i} (pid {proc.pid}) died (exit code {proc.exitcode})") from exc
-        if status == "error":
-            raise WorkerError(f"training worker {i} failed: {payload}")
-        return payload
+    # ------------------------------------------------------------ transport
+    def _start(self) -> None:
+        raise NotImplementedError
 
+    def _request_all(self, command: str, args: list) -> list[StepReply]:
+        """Send ``(command, args[i])`` to worker ``i`` for every worker; the replies in worker order."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    # ------------------------------------------------------------ protocol
     def _stack_obs(self, replies: list[StepReply]) -> TensorDict:
         groups = {
             key: torch.as_tensor(np.stack([r.obs[key] for r in replies]), dtype=torch.float32, device=self.device)
@@ -150,13 +145,7 @@ class SubprocVecEnv(VecEnv):
         if self._closed:
             raise RuntimeError("the VecEnv is closed")
         acts = actions.detach().cpu().numpy().reshape(self.num_envs, self.num_actions)
-        for i, conn in enumerate(self._conns):
-            try:
-                conn.send(("step", self._env_action(acts[i])))
-            except (BrokenPipeError, OSError) as exc:
-                raise WorkerError(f"training worker {i} (pid {self._procs[i].pid}) died "
-                                  f"(exit code {self._procs[i].exitcode})") from exc
-        replies = [self._receive(i) for i in range(self.num_envs)]
+        replies = self._request_all("step", [self._env_action(a) for a in acts])
         self._replies = replies
         self._obs = self._stack_obs(replies)
         rewards = torch.tensor([r.reward for r in replies], dtype=torch.float32, device=self.device)
@@ -190,6 +179,61 @@ class SubprocVecEnv(VecEnv):
         out, self._finished = self._finished, []
         return out
 
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class SubprocVecEnv(WorkerVecEnv):
+    """Workers as local processes over pipes (see :class:`WorkerVecEnv` for the arguments).
+
+    Args:
+        start_method: ``spawn`` (default) or ``forkserver``; never ``fork`` (libsumo, torch threads).
+    """
+
+    def __init__(self, config: WorkerEnvConfig, num_envs: int, seed: int = 0, device: str = "cpu",
+                 start_method: str = "spawn", reply_timeout_s: float = 300.0):
+        if start_method not in ("spawn", "forkserver"):
+            raise ValueError(f"start_method must be 'spawn' or 'forkserver', got {start_method!r}")
+        self._start_method = start_method
+        self._conns, self._procs = [], []
+        super().__init__(config, num_envs, seed=seed, device=device, reply_timeout_s=reply_timeout_s)
+
+    def _start(self) -> None:
+        context = mp.get_context(self._start_method)
+        for i in range(self.num_envs):
+            parent, child = context.Pipe()
+            proc = context.Process(target=run_worker, args=(child, self.config), name=f"hbmp-env-{i}", daemon=True)
+            proc.start()
+            child.close()
+            self._conns.append(parent)
+            self._procs.append(proc)
+
+    def _request_all(self, command: str, args: list) -> list[StepReply]:
+        for i, conn in enumerate(self._conns):
+            try:
+                conn.send((command, args[i]))
+            except (BrokenPipeError, OSError) as exc:
+                raise WorkerError(f"training worker {i} (pid {self._procs[i].pid}) died "
+                                  f"(exit code {self._procs[i].exitcode})") from exc
+        return [self._receive(i) for i in range(self.num_envs)]
+
+    def _receive(self, i: int) -> StepReply:
+        conn, proc = self._conns[i], self._procs[i]
+        try:
+            if not conn.poll(self.reply_timeout_s):
+                raise WorkerError(f"training worker {i} (pid {proc.pid}) did not answer within "
+                                  f"{self.reply_timeout_s:.0f} s")
+            status, payload = conn.recv()
+        except (EOFError, ConnectionResetError, BrokenPipeError) as exc:
+            proc.join(timeout=1.0)
+            raise WorkerError(f"training worker {i} (pid {proc.pid}) died (exit code {proc.exitcode})") from exc
+        if status == "error":
+            raise WorkerError(f"training worker {i} failed: {payload}")
+        return payload
+
     # ---------------------------------------------------------------- close
     def close(self) -> None:
         """Close every environment and join the workers (idempotent); stragglers are terminated."""
@@ -211,8 +255,83 @@ class SubprocVecEnv(VecEnv):
                 proc.join(timeout=5.0)
             conn.close()
 
-    def __enter__(self) -> SubprocVecEnv:
-        return self
 
-    def __exit__(self, *exc) -> None:
-        self.close()
+class RayVecEnv(WorkerVecEnv):
+    """Workers as Ray actors, one environment per actor (see :class:`WorkerVecEnv` for the arguments).
+
+    Args:
+        address: a running cluster (``ray://HEAD:10001``, ``auto``); None starts a local Ray instance
+            unless Ray is already initialised in this process. A local instance started here is shut
+            down by :meth:`close`. Every node needs the package installed (``pip install
+            "hbmp-bench[ray]"``).
+        cpus_per_worker: Ray CPUs each actor reserves.
+
+    An actor that raises, dies or does not answer within ``reply_timeout_s`` is a :class:`WorkerError`.
+    """
+
+    def __init__(self, config: WorkerEnvConfig, num_envs: int, seed: int = 0, device: str = "cpu",
+                 address: str | None = None, cpus_per_worker: float = 1.0, reply_timeout_s: float = 300.0):
+        from hbmp_bench.evaluation.ray_backend import import_ray
+
+        self._ray = import_ray()
+        self._address = address
+        self._cpus = float(cpus_per_worker)
+        self._actors: list = []
+        self._started_ray = False
+        super().__init__(config, num_envs, seed=seed, device=device, reply_timeout_s=reply_timeout_s)
+
+    def _start(self) -> None:
+        ray = self._ray
+        if not ray.is_initialized():
+            ray.init(address=self._address, include_dashboard=False, log_to_driver=False)
+            self._started_ray = True
+        actor_cls = ray.remote(num_cpus=self._cpus, max_restarts=0)(EnvActor)
+        self._actors = [actor_cls.remote(self.config) for _ in range(self.num_envs)]
+
+    def _request_all(self, command: str, args: list) -> list[StepReply]:
+        ray = self._ray
+        refs = [actor.request.remote(command, args[i]) for i, actor in enumerate(self._actors)]
+        replies = []
+        for i, ref in enumerate(refs):
+            try:
+                replies.append(ray.get(ref, timeout=self.reply_timeout_s))
+            except ray.exceptions.GetTimeoutError as exc:
+                raise WorkerError(f"training worker {i} (Ray actor) did not answer within "
+                                  f"{self.reply_timeout_s:.0f} s") from exc
+            except ray.exceptions.RayActorError as exc:
+                raise WorkerError(f"training worker {i} (Ray actor) died: {str(exc)[:500]}") from exc
+            except ray.exceptions.RayTaskError as exc:
+                raise WorkerError(f"training worker {i} failed: {exc}") from exc
+        return replies
+
+    def close(self) -> None:
+        """Close every environment and end the actors (idempotent); a Ray instance started here is shut down."""
+        if self._closed:
+            return
+        self._closed = True
+        ray = self._ray
+        try:
+            if self._actors:
+                closing = [actor.request.remote("close", None) for actor in self._actors]
+                ray.wait(closing, num_returns=len(closing), timeout=10.0)
+        except ray.exceptions.RayError:
+            pass
+        finally:
+            for actor in self._actors:
+                ray.kill(actor)
+            if self._started_ray:
+                ray.shutdown()
+
+
+def make_vec_env(config: WorkerEnvConfig, num_envs: int, seed: int = 0, backend: str = "process",
+                 address: str | None = None, **kwargs) -> WorkerVecEnv:
+    """The ``VecEnv`` of ``backend`` (one of :data:`BACKENDS`); ``address`` only with ``ray``."""
+    if backend == "process":
+        if address is not None:
+            raise ValueError("address is for the ray backend only")
+        return SubprocVecEnv(config, num_envs, seed=seed, **kwargs)
+    if backend == "ray":
+        return RayVecEnv(config, num_envs, seed=seed, address=address, **kwargs)
+    from hbmp_bench.errors import UnknownNameError
+
+    raise UnknownNameError("training backend", backend, BACKENDS)

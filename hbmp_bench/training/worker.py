@@ -1,8 +1,9 @@
 """The environment side of the training ``VecEnv``: one environment per worker process.
 
 libsumo runs one simulation per process, so every environment lives in its own process and
-talks to the trainer over a pipe. This module does not import torch, so that the workers start
-fast; the torch side is :mod:`hbmp_bench.training.vec_env`.
+talks to the trainer over a pipe (:func:`run_worker`) or as a Ray actor (:class:`EnvActor`).
+This module does not import torch, so that the workers start fast; the torch side is
+:mod:`hbmp_bench.training.vec_env`.
 
 Protocol (parent → worker, worker → parent):
     ("reset", seed)  → ("ok", StepReply)   first reset of the worker's run
@@ -192,6 +193,24 @@ class EnvRunner:
 
     def close(self) -> None:
         self.env.close()
+
+
+class EnvActor:
+    """Ray actor body (:class:`~hbmp_bench.training.vec_env.RayVecEnv`): one :class:`EnvRunner` (one
+    env, one libsumo) in the actor's own process, answering the same requests as a pipe worker."""
+
+    def __init__(self, config: WorkerEnvConfig):
+        self.runner = EnvRunner(config)
+
+    def request(self, command: str, arg) -> StepReply | None:
+        if command == "step":
+            return self.runner.step(arg)
+        if command == "reset":
+            return self.runner.reset(arg)
+        if command == "close":
+            self.runner.close()
+            return None
+        raise ValueError(f"unknown worker command {command!r}")
 
 
 def run_worker(conn, config: WorkerEnvConfig) -> None:

@@ -304,3 +304,40 @@ def test_separating_axis_overlap():
     others = box_corners(np.array([[3.9, 0.0], [4.1, 0.0], [0.0, 2.1], [2.5, 2.5]]), np.array([0.0, 0.0, 0.0, np.pi / 4]),
                          np.full(4, 4.0), np.full(4, 2.0))
     assert boxes_overlap(a, others).tolist() == [True, False, False, True]
+
+
+def test_segment_grid_finds_exactly_what_the_full_scan_finds():
+    """The lane lookup's spatial index: the candidates it returns, filtered by the boxes, are the boxes
+    that a scan over every segment of the map finds, in the same order (so the chosen lane is too)."""
+    rng = np.random.default_rng(0)
+    grid = LOCATOR._grid
+    lo_all, hi_all = LOCATOR.lo, LOCATOR.hi
+    span_lo, span_hi = lo_all.min(0) - 30.0, hi_all.max(0) + 30.0
+    found = 0
+    for _ in range(400):
+        centre = rng.uniform(span_lo, span_hi)
+        half = rng.uniform(0.0, 25.0, 2)
+        q_lo, q_hi = centre - half, centre + half
+        full = np.nonzero((hi_all >= q_lo).all(1) & (lo_all <= q_hi).all(1))[0]
+        cand = grid.query(q_lo, q_hi)
+        assert (np.diff(cand) > 0).all()
+        np.testing.assert_array_equal(cand[(hi_all[cand] >= q_lo).all(1) & (lo_all[cand] <= q_hi).all(1)], full)
+        found += len(full) > 0
+    assert found > 100
+
+
+def test_lane_lookup_agrees_with_a_scan_of_every_segment():
+    rng = np.random.default_rng(1)
+    lanes = list(NET.lanes.values())
+    for _ in range(200):
+        lane = lanes[rng.integers(len(lanes))]
+        xy = lane.shape[rng.integers(len(lane.shape))] + rng.normal(0.0, 3.0, 2)
+        points = footprint_points(xy, rng.uniform(-np.pi, np.pi), 4.6, 1.9)
+        got = LOCATOR.locate(points)
+        rel = points[:, None, :] - LOCATOR.a[None]
+        t = np.clip(np.einsum("pmk,mk->pm", rel, LOCATOR.unit), 0.0, LOCATOR.seg_len)
+        dist = np.hypot(*(rel - t[..., None] * LOCATOR.unit[None]).transpose(2, 0, 1))
+        dist = np.where(dist <= LOCATOR.half_width[None], dist, np.inf)
+        best = np.argmin(dist, axis=1)
+        expect = np.where(np.isfinite(dist.min(axis=1)), LOCATOR.lane_index[best], -1)
+        np.testing.assert_array_equal(got[0], expect)
