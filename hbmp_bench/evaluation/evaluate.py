@@ -183,8 +183,7 @@ def evaluate(
         fingerprint = description.fingerprint
     path = Path(path) if path is not None else records_path(out_dir, selection[0].suite, agent)
     path.parent.mkdir(parents=True, exist_ok=True)
-    check_agent_fingerprint(path, agent, fingerprint)
-    check_map_hashes(path, sorted({t.town for t in selection}))
+    check_provenance(path, agent, fingerprint, sorted({t.town for t in selection}))
     repair_records(path)
     ledger = RecordsLedger(path)
     finished = {r.key for r in latest_per_key(ledger.records()) if r.end_reason != SIM_ERROR}
@@ -205,52 +204,52 @@ def evaluate(
                             len(selection) - len(records))
 
 
-def check_agent_fingerprint(path: Path, agent: str, fingerprint: str) -> None:
-    """Refuse to resume ``path`` with other weights than those that began it.
+def code_fingerprint() -> str:
+    """sha256 (first 16 hex digits) of the package's own code and data: every ``.py`` file and
+    every built-in net under ``hbmp_bench/``. An episode's outcome depends on the behavior layer,
+    the planner, the detectors and the rule-based agents as much as on a checkpoint's weights."""
+    import hashlib
 
-    Records are keyed by agent name, so a retrained checkpoint under the same name would
-    otherwise be credited with the old one's episodes. An agent with a ``fingerprint`` (learned
-    agents: their checkpoint's hash) leaves it in ``<records>.agent`` beside the records.
+    root = Path(__file__).resolve().parents[1]
+    digest = hashlib.sha256()
+    for f in sorted(p for pattern in ("*.py", "*.net.xml") for p in root.rglob(pattern)):
+        digest.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")
+    return digest.hexdigest()[:16]
+
+
+def check_provenance(path: Path, agent: str, fingerprint: str, towns: Sequence[str]) -> None:
+    """Refuse to resume ``path`` with anything else than what began it.
+
+    Records are keyed by suite, town, task, episode and agent name, so without this a retrained
+    checkpoint under the same name, a map imported again under the same name, or another version
+    of this package would be credited with the old episodes. What produced the records is kept in
+    ``<records>.provenance.json`` beside them: ``code`` (:func:`code_fingerprint`), ``agent`` (a
+    learned agent's checkpoint hash, "" for the others) and ``maps`` (``maps.map_hash`` of every
+    imported town, which can change under its name; built-in towns are part of the code).
     """
-    if not fingerprint:
-        return
-    side = path.with_name(path.name + ".agent")
-    if side.exists():
-        previous = side.read_text().strip()
-        if previous != fingerprint:
-            raise ValueError(
-                f"{path} holds episodes of another {agent!r} (checkpoint {previous}, now {fingerprint}): "
-                f"evaluate into another folder (--out) or delete {path.name} and {side.name} to start over")
-    elif not path.exists() or path.stat().st_size == 0:
-        tmp = side.with_name(side.name + ".tmp")
-        tmp.write_text(fingerprint + "\n")
-        os.replace(tmp, side)
-
-
-def check_map_hashes(path: Path, towns: Sequence[str]) -> None:
-    """Refuse to resume ``path`` on another net under an imported map's name.
-
-    Records are keyed by town name, so a map imported again under the same name (another town, or
-    the same one with other options) would otherwise be credited with the old net's episodes. The
-    hash of every imported map's net (``maps.map_hash``) is kept in ``<records>.maps`` beside the
-    records; built-in towns change only with the package (``EPISODE_RULES_VERSION``)."""
     import json
 
     from hbmp_bench.maps import TOWNS, map_hash
 
-    current = {town: map_hash(town) for town in towns if town not in TOWNS}
-    if not current:
-        return
-    side = path.with_name(path.name + ".maps")
-    known = json.loads(side.read_text()) if side.exists() else {}
-    changed = {t: (known[t], h) for t, h in current.items() if t in known and known[t] != h}
+    current = {"code": code_fingerprint(), "agent": fingerprint,
+               "maps": {town: map_hash(town) for town in towns if town not in TOWNS}}
+    side = path.with_name(path.name + ".provenance.json")
+    known = json.loads(side.read_text()) if side.exists() else None
+    if known is None and path.exists() and path.stat().st_size > 0:
+        raise UserError(f"{path} holds episodes of unknown provenance (no {side.name}): evaluate into another "
+                        f"folder (--out), or delete {path.name} to start over")
+    known = known or {"code": current["code"], "agent": current["agent"], "maps": {}}
+    changed = [f"{what} {known[what] or '(none)'}, now {current[what] or '(none)'}" for what in ("code", "agent")
+               if known[what] != current[what]]
+    changed += [f"map {t!r} {known['maps'][t]}, now {h}" for t, h in sorted(current["maps"].items())
+                if known["maps"].get(t, h) != h]
     if changed:
-        town, (old, new) = next(iter(sorted(changed.items())))
-        raise UserError(f"{path} holds episodes of another map named {town!r} (net {old}, now {new}): evaluate "
-                        f"into another folder (--out), or delete {path.name} and {side.name} to start over")
-    if any(t not in known for t in current):
+        raise UserError(f"{path} holds episodes of another {agent!r} run ({'; '.join(changed)}): evaluate into "
+                        f"another folder (--out), or delete {path.name} and {side.name} to start over")
+    merged = {**known, "maps": {**known["maps"], **current["maps"]}}
+    if merged != known or not side.exists():
         tmp = side.with_name(side.name + ".tmp")
-        tmp.write_text(json.dumps({**known, **current}, indent=2, sort_keys=True) + "\n")
+        tmp.write_text(json.dumps(merged, indent=2, sort_keys=True) + "\n")
         os.replace(tmp, side)
 
 

@@ -61,8 +61,11 @@ def entry_path(board_dir: str | os.PathLike, suite: str, agent: str, subset: boo
 
 def runs_dir(board_dir: str | os.PathLike, suite: str) -> Path:
     """Where submissions keep their raw JSON-lines records (ignored by git; resumable):
-    ``<board>/<suite>/runs/<suite hash>``, so records of an older suite definition never mix in."""
-    return Path(board_dir) / suite / "runs" / get_suite(suite).definition_hash()
+    ``<board>/<suite>/runs/<suite hash>-<code fingerprint>``, so records of an older suite
+    definition or another version of the package never mix in (see ``evaluate.check_provenance``)."""
+    from hbmp_bench.evaluation.evaluate import code_fingerprint
+
+    return Path(board_dir) / suite / "runs" / f"{get_suite(suite).definition_hash()}-{code_fingerprint()}"
 
 
 def results_document(
