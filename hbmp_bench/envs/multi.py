@@ -68,7 +68,7 @@ class BackgroundAgent:
         self.followed_lane = self.state.lane if self.state.lane in net.lanes else ""
         self.route: tuple[str, ...] = world.spawned_routes[vehicle_id]
         self.light = sim.light_ahead(vehicle_id)
-        self.actors = sim.snapshot().without(vehicle_id)
+        self.actors = sim.snapshot().around(vehicle_id)
         self.crashed = False
         self.decisions = 0
         self._behavior = self._executed = 4
@@ -128,7 +128,7 @@ class BackgroundAgent:
         if state.lane in net.lanes:
             self.followed_lane = state.lane
         self.light = sim.light_ahead(self.id)
-        self.actors = snapshot.without(self.id)
+        self.actors = snapshot.around(self.id)
         a, lane = self.actors, self.followed_lane
         ev = self.detector.update(
             EgoFrame(self.state.xy, self.state.yaw, BACKGROUND_TYPE.length, BACKGROUND_TYPE.width,

@@ -164,7 +164,7 @@ class DrivingWorld:
         self.detector = InfractionDetector(self.locator, self.goal_xy, episode.success_radius_m, episode.timeout_s)
         self._set_route(episode.route)
         self.reroutes = 0
-        self._actors = self.sim.snapshot().without(EGO_ID)
+        self._actors = self.sim.snapshot().around(EGO_ID)
         return self._observe(StepEvents())
 
     def _continuation(self, edge: str, length_m: float = 30.0) -> tuple[str, ...]:
@@ -318,7 +318,7 @@ class DrivingWorld:
         self.distance_m += float(np.hypot(*(state.xy - self._last_xy)))
         self._last_xy = state.xy
         self._update_progress(state)
-        actors = snapshot.without(EGO_ID)
+        actors = snapshot.around(EGO_ID)
         lane = self._followed_lane
         ev = self.detector.update(
             EgoFrame(state.xy, state.yaw, EGO_TYPE.length, EGO_TYPE.width,

@@ -48,14 +48,17 @@ def _fmt(v: float) -> str:
     return f"{v:.2f}"
 
 
-def _shape(points: list[tuple[float, float]]) -> str:
-    return " ".join(f"{_fmt(x)},{_fmt(y)}" for x, y in points)
+def _shape(points: list[tuple[float, ...]]) -> str:
+    return " ".join(",".join(_fmt(c) for c in p) for p in points)
 
 
-def _road_points(spec: TownSpec, road: Road) -> list[tuple[float, float]]:
+def _road_points(spec: TownSpec, road: Road) -> list[tuple[float, ...]]:
+    """The road's shape (m): (x, y), or (x, y, z) for a bridge (``road.elevation``)."""
     a, b = spec.node(road.a), spec.node(road.b)
-    pts = [(a.x, a.y), *road.corners, (b.x, b.y)]
-    return rounded_polyline(pts, road.radius)
+    pts = rounded_polyline([(a.x, a.y), *road.corners, (b.x, b.y)], road.radius)
+    if not road.elevation:
+        return pts
+    return [(*p, 0.0 if k in (0, len(pts) - 1) else road.elevation) for k, p in enumerate(pts)]
 
 
 def _edge_element(parent: ET.Element, edge_id: str, frm: str, to: str, road: Road,

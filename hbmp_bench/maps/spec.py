@@ -52,6 +52,8 @@ class Road:
         radius: radius of the rounded corners, m; 0 keeps ``corners`` as plain shape
             points (e.g. an arc made with :func:`arc_points`).
         oneway: only the a -> b edge is built.
+        elevation: height [m] of every shape point between the two end nodes (which stay at 0):
+            a bridge over the roads it crosses; 0 keeps the road flat.
         sidewalk: add a sidewalk of :data:`SIDEWALK_WIDTH` m to each edge.
         id: edge id of the forward edge; default ``"a_b"``. The backward edge gets the
             id of the forward edge with a leading ``-``.
@@ -66,6 +68,7 @@ class Road:
     oneway: bool = False
     sidewalk: bool = True
     id: str | None = None
+    elevation: float = 0.0
 
     @property
     def edge_id(self) -> str:

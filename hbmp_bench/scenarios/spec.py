@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, field
 TASKS: tuple[str, ...] = ("Straight", "OneTurn", "Navigation", "NavigationDynamic")
 """The CoRL2017 task categories, as used in env ids (``hbmp_bench/Town01-OneTurn-v0``)."""
 
-EPISODE_RULES_VERSION = 5
+EPISODE_RULES_VERSION = 6
 """Version of how a suite's episodes are drawn and measured, part of ``Suite.definition_hash`` so
 that records and leaderboard results of older episode lists never mix with current ones. Bump it
 whenever the episode lists or their route lengths / timeouts change. 2: route length is the length
@@ -18,7 +18,9 @@ are the shortest by that length (2 chose them by edge lengths alone). 4: the lan
 reach the goal lane in time (``RoadNetwork.route_lanes``: one lane change takes 3 s at the limit).
 5: the towns' lights follow the kinematic yellow rule (3.4 s at 50 km/h, 3.8 s at 60 km/h), a 2 s
 all-red after every yellow, no protected left phases, and 20 s greens (12 s in Town02 and Town03);
-the routes are unchanged, the signals the ego meets are not."""
+the routes are unchanged, the signals the ego meets are not. 6: Town04's outer ramps bridge 6 m over
+the inner carriageway (a car on the bridge no longer collides with one below); those ramps are
+0.6 m longer."""
 
 TASK_LABELS = {
     "Straight": "Straight",

@@ -24,8 +24,8 @@ import sumo
 
 tc = libsumo.constants
 
-_SUBSCRIBED = (tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED)
-_EGO_SUBSCRIBED = (tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED, tc.VAR_LANE_ID, tc.VAR_LANEPOSITION, tc.VAR_ROUTE_INDEX)
+_SUBSCRIBED = (tc.VAR_POSITION3D, tc.VAR_ANGLE, tc.VAR_SPEED)
+_EGO_SUBSCRIBED = (tc.VAR_POSITION3D, tc.VAR_ANGLE, tc.VAR_SPEED, tc.VAR_LANE_ID, tc.VAR_LANEPOSITION, tc.VAR_ROUTE_INDEX)
 
 
 @dataclass(frozen=True)
@@ -46,6 +46,10 @@ EGO_TYPE = VehicleType("hbmp_ego")
 BACKGROUND_TYPE = VehicleType("hbmp_background")
 PEDESTRIAN_SIZE_M = 0.6
 """Square footprint side of a pedestrian for collision checks [m]."""
+LEVEL_CLEARANCE_M = 3.0
+"""Actors whose elevations differ by this much or more are on different levels (a bridge over a
+road) [m]: they can neither touch nor block each other. A road's grade changes the height of two
+cars on it by less (20 % over 10 m: 2 m)."""
 
 
 @dataclass(frozen=True)
@@ -59,6 +63,7 @@ class Actors:
         speed: (K,) [m/s].
         length / width: (K,) footprint [m].
         is_pedestrian: (K,) bool.
+        z: (K,) elevation [m] (0 on a flat map).
     """
 
     ids: tuple[str, ...]
@@ -68,25 +73,31 @@ class Actors:
     length: np.ndarray
     width: np.ndarray
     is_pedestrian: np.ndarray
+    z: np.ndarray
 
     def __len__(self) -> int:
         return len(self.ids)
 
-    def without(self, actor_id: str) -> "Actors":
-        """The same snapshot less one actor (e.g. the ego)."""
-        if actor_id not in self.ids:
-            return self
-        at = self.ids.index(actor_id)
+    def around(self, actor_id: str, clearance_m: float = LEVEL_CLEARANCE_M) -> "Actors":
+        """The actors ``actor_id`` can meet: every other one on its level (elevation within
+        ``clearance_m`` [m] of its own; all others when it is absent). Its detectors, M_t and
+        motion planner see these: a car on a bridge is no obstacle to one on the road below."""
         keep = np.ones(len(self.ids), dtype=bool)
-        keep[at] = False
+        if actor_id in self.ids:
+            at = self.ids.index(actor_id)
+            keep = np.abs(self.z - self.z[at]) < clearance_m
+            keep[at] = False
+        if keep.all():
+            return self
         return Actors(
-            ids=self.ids[:at] + self.ids[at + 1:],
+            ids=tuple(i for i, k in zip(self.ids, keep) if k),
             xy=self.xy[keep],
             yaw=self.yaw[keep],
             speed=self.speed[keep],
             length=self.length[keep],
             width=self.width[keep],
             is_pedestrian=self.is_pedestrian[keep],
+            z=self.z[keep],
         )
 
 
@@ -280,14 +291,15 @@ class SumoSim:
 
     def snapshot(self) -> Actors:
         """All inserted vehicles and pedestrians now (footprint centres)."""
-        vehicles = libsumo.vehicle.getAllSubscriptionResults()
-        persons = libsumo.person.getAllSubscriptionResults()
-        ids = (*vehicles, *persons)
+        pos_, angle_, speed_ = tc.VAR_POSITION3D, tc.VAR_ANGLE, tc.VAR_SPEED
+        # a vehicle still waiting for its insertion has no valid 3D position (an invalid 2D one): not on the road
+        results = {i: r for group in (libsumo.vehicle.getAllSubscriptionResults(),
+                                      libsumo.person.getAllSubscriptionResults())
+                   for i, r in group.items() if len(r.get(pos_, ())) == 3}
+        ids = tuple(results)
         k = len(ids)
-        pos_, angle_, speed_ = tc.VAR_POSITION, tc.VAR_ANGLE, tc.VAR_SPEED
-        rows = np.array([(*v[pos_], v[angle_], v[speed_]) for group in (vehicles, persons) for v in group.values()],
-                        dtype=float).reshape(k, 4)
-        pos, yaw, speed = rows[:, :2], sumo_angle_to_yaw(rows[:, 2]), rows[:, 3]
+        rows = np.array([(*r[pos_], r[angle_], r[speed_]) for r in results.values()], dtype=float).reshape(k, 5)
+        pos, z, yaw, speed = rows[:, :2], rows[:, 2], sumo_angle_to_yaw(rows[:, 3]), rows[:, 4]
         if self._snapshot_dims is None or self._snapshot_dims[0] != ids:  # actors rarely change: cache
             dims = np.array([self._dims.get(i, (4.5, 1.8, False)) for i in ids], dtype=float).reshape(k, 3)
             cached = (dims[:, 0].copy(), dims[:, 1].copy(), dims[:, 2].astype(bool))
@@ -300,7 +312,7 @@ class SumoSim:
         np.cos(yaw, out=heading[:, 0])
         np.sin(yaw, out=heading[:, 1])
         heading *= to_centre
-        return Actors(ids, np.subtract(pos, heading, out=heading), yaw, speed, length, width, is_ped)
+        return Actors(ids, np.subtract(pos, heading, out=heading), yaw, speed, length, width, is_ped, z)
 
     def vehicle_state(self, vehicle_id: str) -> VehicleState | None:
         """Pose and lane of a subscribed vehicle with lane variables (the ego), None if absent."""
@@ -309,7 +321,7 @@ class SumoSim:
             return None
         length = self._dims[vehicle_id][0]
         yaw = float(sumo_angle_to_yaw(r[tc.VAR_ANGLE]))
-        front = np.asarray(r[tc.VAR_POSITION], dtype=float)
+        front = np.asarray(r[tc.VAR_POSITION3D][:2], dtype=float)
         return VehicleState(
             xy=front - length / 2 * np.array([math.cos(yaw), math.sin(yaw)]),
             yaw=yaw,

@@ -5,8 +5,8 @@ The highway is two one-way carriageways (4 lanes each, 25 m/s) on a rectangle of
 one (``INSET`` m inside) clockwise, so both keep the median on their left. Each side
 has an interchange: a signalised ramp terminal ``R`` (``RAMP_T`` m inside the outer
 carriageway) with an exit and an entry ramp (1 lane, 16.67 m/s) to each carriageway;
-ramps of the outer carriageway bridge over the inner one (no junction where they
-cross). A connector road links each terminal with the town, a 4 x 3 grid of one-lane
+ramps of the outer carriageway bridge over the inner one (``BRIDGE_Z`` m up, no junction
+where they cross: actors on the two levels never meet). A connector road links each terminal with the town, a 4 x 3 grid of one-lane
 streets (80 m blocks, signalised junctions, rounded outer corners); the southern
 connector has two lanes. Besides the ramp junctions each carriageway is split once per
 side (nodes ``K``) before the corner.
@@ -20,6 +20,7 @@ T, P = "traffic_light", "priority"
 W, H = 760.0, 680.0      # outer carriageway rectangle, m
 INSET = 24.0             # inner carriageway inset, m
 RAMP_T = 60.0            # ramp terminal distance inside the outer carriageway, m
+BRIDGE_Z = 6.0           # height of the bridging ramps over the inner carriageway, m
 HW_RADIUS = 70.0         # outer corner radius, m (inner: HW_RADIUS - INSET)
 CX, CY = W / 2, H / 2    # town centre, m
 BLOCK = 80.0             # town block size, m
@@ -45,11 +46,12 @@ _INNER_CORNERS = ((INSET, INSET), (W - INSET, INSET), (W - INSET, H - INSET),
 _STATIONS_OUTER = (("Dout", -130.0), ("Mout", 130.0), ("Kout", 220.0))   # in driving order
 _STATIONS_INNER = (("Din", 45.0), ("Min", -45.0), ("Kin", -220.0))
 _RAMPS = (
-    # from, to, shape points (u, v) between them
-    ("Dout", "R", ((-100.0, -12.0), (-60.0, -12.0), (-60.0, RAMP_T))),
-    ("R", "Mout", ((60.0, RAMP_T), (60.0, -12.0), (100.0, -12.0))),
-    ("Din", "R", ((20.0, 40.0),)),
-    ("R", "Min", ((-20.0, 40.0),)),
+    # from, to, shape points (u, v) between them, elevation of those points [m] (the outer
+    # carriageway's ramps bridge over the inner one)
+    ("Dout", "R", ((-100.0, -12.0), (-60.0, -12.0), (-60.0, RAMP_T)), BRIDGE_Z),
+    ("R", "Mout", ((60.0, RAMP_T), (60.0, -12.0), (100.0, -12.0)), BRIDGE_Z),
+    ("Din", "R", ((20.0, 40.0),), 0.0),
+    ("R", "Min", ((-20.0, 40.0),), 0.0),
 )
 # Town junction each terminal's connector leads to, and the connector's lane count.
 _CONNECT = {"S": ("T1_0", 2), "E": ("T3_1", 1), "N": ("T2_2", 1), "W": ("T0_1", 1)}
@@ -94,10 +96,10 @@ def _interchanges() -> tuple[list[Node], list[Road]]:
         s = side[0]
         r = f"R_{s}"
         nodes.append(Node(r, *_at(side, 0.0, RAMP_T), T))
-        for a, b, pts in _RAMPS:
+        for a, b, pts, z in _RAMPS:
             roads.append(Road(f"{a}_{s}" if a != "R" else r, f"{b}_{s}" if b != "R" else r,
                               lanes=1, speed=RAMP_SPEED, oneway=True, sidewalk=False,
-                              corners=tuple(_at(side, u, v) for u, v in pts), radius=15.0))
+                              corners=tuple(_at(side, u, v) for u, v in pts), radius=15.0, elevation=z))
         town_node, lanes = _CONNECT[s]
         roads.append(Road(r, town_node, lanes=lanes))
     return nodes, roads
