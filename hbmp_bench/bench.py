@@ -198,46 +198,35 @@ class _Timer:
             self.times.append(time.perf_counter() - t0)
 
 
-class _TimedObserver:
-    """Stands in for a world's :class:`ObservationBuilder`, timing ``occupancy`` (M_t)."""
-
-    def __init__(self, observer):
-        self._observer = observer
-        self.occupancy = _Timer(observer.occupancy)
-
-    def __getattr__(self, name):
-        return getattr(self._observer, name)
-
-
 @contextlib.contextmanager
 def _instrumented(env):
-    """Time the SUMO step, the driver's control period, the planner, M_t and R_t of ``env`` in place.
+    """Time the SUMO step, the ego driver's control period, the planner, M_t, R_t and the detectors
+    of ``env`` in place (instance attributes shadow the methods; module functions are swapped).
 
     Yields a dict name -> :class:`_Timer`; everything is restored on exit."""
-    import hbmp_bench.envs.world as world_module
+    import hbmp_bench.envs.vehicle as vehicle_module
     import hbmp_bench.planning.executor as executor_module
 
     from hbmp_bench.metrics.detectors import InfractionDetector
 
     world = env.world
     timers = {"sumo_step": _Timer(world.sim.step), "snapshot": _Timer(world.sim.snapshot),
-              "driver_before_step": _Timer(world.driver.before_step),
-              "planner": _Timer(executor_module.plan), "road_profile": _Timer(world_module.road_profile),
-              "detectors": _Timer(InfractionDetector.update)}
-    observer = _TimedObserver(world.observer)
-    timers["occupancy"] = observer.occupancy
-    saved = world.observer, executor_module.plan, world_module.road_profile
+              "driver_before_step": _Timer(world.ego_driver.before_step),
+              "planner": _Timer(executor_module.plan), "road_profile": _Timer(vehicle_module.road_profile),
+              "detectors": _Timer(InfractionDetector.update), "occupancy": _Timer(world.observer.occupancy)}
+    saved = executor_module.plan, vehicle_module.road_profile
     world.sim.step, world.sim.snapshot = timers["sumo_step"], timers["snapshot"]
-    world.driver.before_step = timers["driver_before_step"]
-    world.observer, executor_module.plan, world_module.road_profile = observer, timers["planner"], timers["road_profile"]
+    world.ego_driver.before_step = timers["driver_before_step"]
+    world.observer.occupancy = timers["occupancy"]
+    executor_module.plan, vehicle_module.road_profile = timers["planner"], timers["road_profile"]
     detector_timer = timers["detectors"]
     InfractionDetector.update = lambda self, *args: detector_timer(self, *args)  # the detector is per episode
     try:
         yield timers
     finally:
-        del world.sim.step, world.sim.snapshot, world.driver.before_step
+        del world.sim.step, world.sim.snapshot, world.ego_driver.before_step, world.observer.occupancy
         InfractionDetector.update = detector_timer.fn
-        world.observer, executor_module.plan, world_module.road_profile = saved
+        executor_module.plan, vehicle_module.road_profile = saved
 
 
 def _make_env(cfg: BenchConfig, town: str, fidelity: str):

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
 
@@ -32,6 +33,12 @@ from hbmp_bench.planning.frame import Path
 from hbmp_bench.planning.frame import round_corners as smooth_polyline
 
 ROAD_FEATURES = ("e_l", "e_r", "a_l", "a_c", "a_r", "l_g", "l_y", "l_r", "d_s", "dv")
+"""R_t's entries in order; :class:`Road` names their indices."""
+Road = IntEnum("Road", [(name.upper(), k) for k, name in enumerate(ROAD_FEATURES)])
+"""Index of each R_t entry by name: ``road[Road.A_C]`` is a_c (no reading R_t by position)."""
+LANE_WIDTH_M = 3.5
+"""Lane width of the towns' networks [m] (``netconvert --default.lanewidth``), the scale of
+lateral errors and of a lane offset in M_t's cells."""
 GREEN, YELLOW, RED = "gGoOs", "yY", "rRu"
 
 

@@ -100,7 +100,7 @@ def run_multi(town: str, task: str, index: int, controlled: int, ego_fidelity: s
 
 def _ego_record_so_far(env) -> dict:
     """The ego's record of an episode cut at ``max_steps``."""
-    return env.world.ego.record().to_dict()
+    return env.record().to_dict()
 
 
 def run_case(name: str) -> dict:

@@ -173,13 +173,13 @@ def test_ego_env_drives_background_agents_with_a_policy():
                              ego_fidelity="event")
     obs, info = env.reset(seed=0)
     assert env.observation_space.contains(obs)
-    start = env.parallel.world.ego.sim.time
+    start = env.parallel.world.sim.time
     for _ in range(20):
         obs, reward, terminated, truncated, info = env.step(0)
         assert env.observation_space.contains(obs)
         if terminated or truncated:
             break
-    elapsed = env.parallel.world.ego.sim.time - start
+    elapsed = env.parallel.world.sim.time - start
     speeds = [env._infos[a]["scene"]["speed_mps"] for a in ("bg0", "bg1", "bg2")]
     env.close()
     assert elapsed >= 1.9  # 20 ego decisions of 0.1 s
