@@ -52,6 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from hbmp_bench import __version__
+from hbmp_bench.rollout import EpisodeHooks, run_episode
 
 FIDELITIES = ("event", "continuous")
 HIGHWAY_ENVS = ("highway-fast-v0", "intersection-v0")
@@ -270,25 +271,23 @@ def measure_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float | Non
     step_length = env.config.step_length_s
     decisions = sim_steps = episodes = 0
     stepping = resetting = 0.0
+
+    def count_steps(obs, reward, terminated, truncated, info) -> None:
+        nonlocal sim_steps
+        sim_steps += int(round(info["duration_s"] / step_length))
+
+    def timed_out(run) -> bool:  # the agent's time is not the env's: only env.step counts
+        return stepping + run.stepping_s >= seconds
+
+    hooks = EpisodeHooks(on_step=count_steps, stop=timed_out)
     try:
-        t0 = time.perf_counter()
-        obs, info = env.reset(seed=0)
-        resetting += time.perf_counter() - t0
-        agent.reset(info)
         with _instrumented(env) as timers:
             while stepping < seconds:
-                action = agent.act(obs, info)  # the agent's time is not the env's
-                t0 = time.perf_counter()
-                obs, _, terminated, truncated, info = env.step(action)
-                stepping += time.perf_counter() - t0
-                decisions += 1
-                sim_steps += int(round(info["duration_s"] / step_length))
-                if terminated or truncated:
-                    episodes += 1
-                    t0 = time.perf_counter()
-                    obs, info = env.reset(seed=episodes)
-                    resetting += time.perf_counter() - t0
-                    agent.reset(info)
+                run = run_episode(env, agent, seed=episodes, hooks=hooks)
+                stepping += run.stepping_s
+                resetting += run.reset_s
+                decisions += run.decisions
+                episodes += run.ended
             latency = {name: latency_stats(t.times) for name, t in timers.items()}
             share = {name: round(sum(t.times) / stepping, 4) for name, t in timers.items()}
     finally:
