@@ -21,7 +21,6 @@ next episode.
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import time
 import traceback
 from multiprocessing import reduction
@@ -31,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from hbmp_bench import rollout
+from hbmp_bench.plugins import resolve
 from hbmp_bench.evaluation import channel
 from hbmp_bench.evaluation.sandbox import protect_process
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, adopt_environment, watch_lifeline
@@ -51,8 +51,7 @@ def build_env(task: EpisodeTask, factory: str | None, env_kwargs: dict | None = 
 
         make = BehaviorEnv
     else:
-        module_name, _, attr = factory.partition(":")
-        make = getattr(importlib.import_module(module_name), attr)
+        make = resolve(factory, "env factory")
     return make(town=task.town, task=task.task, suite=task.suite, fidelity=task.fidelity, **(env_kwargs or {}))
 
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -16,6 +15,7 @@ from hbmp_bench.metrics.detectors import EVENT_KINDS
 from hbmp_bench.metrics.episode import EpisodeId, EpisodeScorer, terminal_reward
 from hbmp_bench.metrics.records import EpisodeRecord
 from hbmp_bench.planning.behaviors import BEHAVIORS, Behavior
+from hbmp_bench.plugins import resolve
 from hbmp_bench.transfer.adapter import HighwayAdapter, to_meta_action
 from hbmp_bench.transfer.scenes import TransferScene, get_scene
 
@@ -63,11 +63,6 @@ class TransferConfig:
 def _no_events() -> dict[str, int]:
     """Event counts by kind: the SUMO kinds (``EVENT_KINDS``) plus ``collision_other`` (obstacles)."""
     return {k: 0 for k in (*EVENT_KINDS, "collision_other")}
-
-
-def _load_class(path: str):
-    module, _, name = path.partition(":")
-    return getattr(importlib.import_module(module), name)
 
 
 def _vehicle_classes() -> tuple[type, ...]:
@@ -177,7 +172,7 @@ class HighwayTransferEnv(gym.Env):
     def highway_env(self):
         """The wrapped highway-env environment (created on first use)."""
         if self._hw is None:
-            cls = _load_class(self.scene.env_class)
+            cls = resolve(self.scene.env_class, "highway-env class")
             config = self.scene.highway_config(self.config.decision_hz, self.config.speed_step_mps)
             self._hw = cls(config=config, render_mode=self.render_mode)
         return self._hw
