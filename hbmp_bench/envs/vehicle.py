@@ -38,7 +38,7 @@ from hbmp_bench.metrics.episode import EpisodeScorer, events_reward
 from hbmp_bench.metrics.geometry import LaneLocator, stop_line_of
 from hbmp_bench.planning.behaviors import BEHAVIORS, Behavior
 from hbmp_bench.scenarios import Episode
-from hbmp_bench.sim.sumo import Actors, SumoSim, VehicleState, VehicleType
+from hbmp_bench.sim.sumo import Actors, LightAhead, SumoSim, VehicleState, VehicleType
 
 ROUTE_HORIZON_EDGES = 8
 """A circulating vehicle's route is extended when fewer edges than this are left on it."""
@@ -250,8 +250,7 @@ class LoopRoute:
 
     def moved(self) -> None:
         """SUMO's next light on the route, read while the vehicle exists (for R_t)."""
-        light = self.v.shared.sim.light_ahead(self.v.id)
-        self.light = None if light is None else (light.tls, light.link_index, light.distance, light.state)
+        self.light: LightAhead | None = self.v.shared.sim.light_ahead(self.v.id)
 
     def _set(self, edges: list[str]) -> None:
         v = self.v
@@ -455,9 +454,9 @@ class GoalRoute:
         tls, index = fixed[2], fixed[3]
         return (self._to_stop_line(lane), sim.light_state(tls, index), sim.signal_schedule(tls, index))
 
-    def _route_lights(self) -> list[tuple[str, int, float, str]]:
-        """The traffic lights ahead along the route, nearest first, up to ``LIGHTS_RANGE_M``: (tls,
-        link index, distance from the front bumper to the stop line [m], signal). At the end of the
+    def _route_lights(self) -> list[LightAhead]:
+        """The traffic lights ahead along the route, nearest first, up to ``LIGHTS_RANGE_M``
+        (distance from the front bumper to the stop line [m]). At the end of the
         followed lane, its link's (the one the detectors judge); beyond, those of the links the
         route takes. SUMO's own next lights (``getNextTLS``) follow SUMO's map matching of a pushed
         pose, which may jump to another visit of a junction."""
@@ -471,7 +470,7 @@ class GoalRoute:
         fixed = v.shared.locator.stop_line(lane, nxt)
         ahead = self._to_stop_line(lane)
         if fixed is not None and ahead > 0.0:
-            out.append((fixed[2], fixed[3], ahead, sim.light_state(fixed[2], fixed[3])))
+            out.append(LightAhead(fixed[2], fixed[3], ahead, sim.light_state(fixed[2], fixed[3])))
         if nxt is None:
             return out
         own = next((c for c in net.connections[net.lane(lane).edge] if c.from_lane == lane and c.to_edge == nxt), None)
@@ -482,6 +481,6 @@ class GoalRoute:
                 break
             link = net.route_link(self.edges[j], self.edges[j + 1], to_lane)
             if link.tls:
-                out.append((link.tls, link.link_index, distance, sim.light_state(link.tls, link.link_index)))
+                out.append(LightAhead(link.tls, link.link_index, distance, sim.light_state(link.tls, link.link_index)))
             to_lane = link.to_lane
         return out

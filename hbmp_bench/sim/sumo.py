@@ -124,7 +124,8 @@ class VehicleState:
 
 @dataclass(frozen=True)
 class LightAhead:
-    """The next traffic light on a vehicle's route: its state char and distance to the stop line [m]."""
+    """A traffic light ahead on a vehicle's route: the link (``tls``, ``link_index``), the distance
+    from the front bumper to its stop line [m] and its signal char now (``r``, ``y``, ``G`` ...)."""
 
     tls: str
     link_index: int
