@@ -32,6 +32,7 @@ import numpy as np
 from hbmp_bench.envs.drivers import LANE_CHANGE_CUTOFF_M, feasible_behaviors
 from hbmp_bench.envs.observation import ObservationBuilder, road_profile
 from hbmp_bench.envs.privileged import LIGHTS_RANGE_M, PrivilegedScene
+from hbmp_bench.envs.scene import Scene
 from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents, StopLine
 from hbmp_bench.metrics.episode import EpisodeScorer, events_reward
@@ -128,6 +129,8 @@ class ControlledVehicle:
         """``goal``, ``collision``, ``violation``, ``timeout`` or ``left_network`` once its episode ended."""
         self.behavior = self.executed = Behavior.KEEP
         self.behavior_start_s = shared.sim.time
+        self.scene: Scene | None = None
+        """The typed scene of the last observation (``info["scene"]`` is its dict)."""
         route.attach(self)
 
     @property
@@ -210,9 +213,9 @@ class ControlledVehicle:
         return obs, r_terminal + (r_k if self.shared.dense_reward else 0.0), info
 
     def observe(self, events: StepEvents) -> tuple[dict, dict]:
-        """({"occupancy": M_t, "road": R_t}, info) now."""
+        """({"occupancy": M_t, "road": R_t}, info) now; ``self.scene`` is the typed scene."""
         s, a, k = self.state, self.actors, self.route.index()
-        road, scene = self.route.road_profile()
+        road, self.scene = self.route.road_profile()
         occupancy = self.shared.observer.occupancy(s.xy, s.yaw, self.followed_lane or s.lane,
                                                    self.route.edges[k + 1: k + 4], a.xy, a.yaw, a.length, a.width)
         info = {
@@ -220,7 +223,7 @@ class ControlledVehicle:
             "events": {kind: getattr(events, kind) for kind in EVENT_KINDS},
             "infractions": dict(self.detector.totals),
             "time_s": self.shared.sim.time,
-            "scene": scene,
+            "scene": self.scene.to_dict(),
         }
         return {"occupancy": occupancy, "road": road}, info
 
@@ -278,11 +281,13 @@ class LoopRoute:
     def action_mask(self) -> np.ndarray:
         return feasible_behaviors(self.v.shared.net, self.v.state.lane)
 
-    def road_profile(self) -> tuple[np.ndarray, dict]:
+    def road_profile(self) -> tuple[np.ndarray, Scene]:
+        """R_t (10,) and the scene."""
         v = self.v
         s, net = v.state, v.shared.net
         goal_lane = net.edge_lanes[self.edges[-1]][0]
-        return road_profile(net, s.lane, s.lane_pos, self.edges, self.index(), goal_lane, s.speed, self.light)
+        road, scene = road_profile(net, s.lane, s.lane_pos, self.edges, self.index(), goal_lane, s.speed, self.light)
+        return road, Scene(**scene)
 
 
 class GoalRoute:
@@ -381,18 +386,18 @@ class GoalRoute:
         self.score.progressed_to(ep.route_length_m - remaining)
 
     # -------------------------------------------------------------- observe
-    def road_profile(self) -> tuple[np.ndarray, dict]:
+    def road_profile(self) -> tuple[np.ndarray, Scene]:
+        """R_t (10,) and the scene with the privileged fields."""
         v, ep = self.v, self.episode
         ego, net = v.state, v.shared.net
         lights = self._route_lights()
         lane, lane_pos = self._profile_lane()
         road, scene = road_profile(net, lane, lane_pos, self.edges, self.index(), ep.goal_lane, ego.speed,
                                    lights[0] if lights else None, ep.goal_pos)
-        scene["goal_distance_m"] = float(np.hypot(*(ego.xy - self.goal_xy)))
-        scene.update(self.privileged.fields(ego, v.followed_lane, v.next_edges(), v.actors, lights,
-                                            self._junction_exit_m()))
-        scene["route_lane_light"] = self._route_lane_light(lane, scene["route_lane_offset"])
-        return road, scene
+        privileged = self.privileged.fields(ego, v.followed_lane, v.next_edges(), v.actors, lights,
+                                            self._junction_exit_m())
+        return road, Scene(**scene, **privileged, goal_distance_m=float(np.hypot(*(ego.xy - self.goal_xy))),
+                           route_lane_light=self._route_lane_light(lane, scene["route_lane_offset"]))
 
     def _profile_lane(self) -> tuple[str, float]:
         """The lane R_t is read on and the front bumper's position on it [m].

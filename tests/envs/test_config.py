@@ -39,3 +39,15 @@ def test_configs_are_frozen_and_checked():
         WorldConfig(fidelity="event", ego_driver="control")
     with pytest.raises(ValueError, match="background_fidelity"):
         WorldConfig(background_fidelity="control")
+
+
+def test_scene_dict_leaves_out_what_a_vehicle_does_not_have():
+    from hbmp_bench.envs.scene import Scene
+
+    base = dict(speed_mps=3.0, speed_limit_mps=13.9, in_junction=False, route_lane_offset=0,
+                stop_distance_m=20.0, lane_pos_m=5.0, light="r", turn_ahead="s")
+    assert Scene(**base).to_dict() == base
+    ego = Scene(**base, goal_distance_m=80.0, route_lane_light=(), pedestrians=())
+    assert ego.to_dict() == {**base, "goal_distance_m": 80.0, "route_lane_light": (), "pedestrians": ()}
+    with pytest.raises(TypeError):
+        Scene(**base, speed=1.0)  # a misspelt field fails where the scene is built
