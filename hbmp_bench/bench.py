@@ -56,6 +56,7 @@ from pathlib import Path
 import numpy as np
 
 from hbmp_bench import __version__
+from hbmp_bench.rollout import EpisodeHooks, run_episode
 
 FIDELITIES = ("event", "continuous")
 HIGHWAY_ENVS = ("highway-fast-v0", "intersection-v0")
@@ -219,46 +220,35 @@ class _Timer:
             self.times.append(time.perf_counter() - t0)
 
 
-class _TimedObserver:
-    """Stands in for a world's :class:`ObservationBuilder`, timing ``occupancy`` (M_t)."""
-
-    def __init__(self, observer):
-        self._observer = observer
-        self.occupancy = _Timer(observer.occupancy)
-
-    def __getattr__(self, name):
-        return getattr(self._observer, name)
-
-
 @contextlib.contextmanager
 def _instrumented(env):
-    """Time the SUMO step, the driver's control period, the planner, M_t and R_t of ``env`` in place.
+    """Time the SUMO step, the ego driver's control period, the planner, M_t, R_t and the detectors
+    of ``env`` in place (instance attributes shadow the methods; module functions are swapped).
 
     Yields a dict name -> :class:`_Timer`; everything is restored on exit."""
-    import hbmp_bench.envs.world as world_module
+    import hbmp_bench.envs.vehicle as vehicle_module
     import hbmp_bench.planning.executor as executor_module
 
     from hbmp_bench.metrics.detectors import InfractionDetector
 
     world = env.world
     timers = {"sumo_step": _Timer(world.sim.step), "snapshot": _Timer(world.sim.snapshot),
-              "driver_before_step": _Timer(world.driver.before_step),
-              "planner": _Timer(executor_module.plan), "road_profile": _Timer(world_module.road_profile),
-              "detectors": _Timer(InfractionDetector.update)}
-    observer = _TimedObserver(world.observer)
-    timers["occupancy"] = observer.occupancy
-    saved = world.observer, executor_module.plan, world_module.road_profile
+              "driver_before_step": _Timer(world.ego_driver.before_step),
+              "planner": _Timer(executor_module.plan), "road_profile": _Timer(vehicle_module.road_profile),
+              "detectors": _Timer(InfractionDetector.update), "occupancy": _Timer(world.observer.occupancy)}
+    saved = executor_module.plan, vehicle_module.road_profile
     world.sim.step, world.sim.snapshot = timers["sumo_step"], timers["snapshot"]
-    world.driver.before_step = timers["driver_before_step"]
-    world.observer, executor_module.plan, world_module.road_profile = observer, timers["planner"], timers["road_profile"]
+    world.ego_driver.before_step = timers["driver_before_step"]
+    world.observer.occupancy = timers["occupancy"]
+    executor_module.plan, vehicle_module.road_profile = timers["planner"], timers["road_profile"]
     detector_timer = timers["detectors"]
     InfractionDetector.update = lambda self, *args: detector_timer(self, *args)  # the detector is per episode
     try:
         yield timers
     finally:
-        del world.sim.step, world.sim.snapshot, world.driver.before_step
+        del world.sim.step, world.sim.snapshot, world.ego_driver.before_step, world.observer.occupancy
         InfractionDetector.update = detector_timer.fn
-        world.observer, executor_module.plan, world_module.road_profile = saved
+        executor_module.plan, vehicle_module.road_profile = saved
 
 
 def _make_env(cfg: BenchConfig, town: str, fidelity: str):
@@ -305,26 +295,24 @@ def measure_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float | Non
     step_length = env.config.step_length_s
     decisions = sim_steps = episodes = 0
     stepping = resetting = cpu = 0.0
+
+    def count_steps(obs, reward, terminated, truncated, info) -> None:
+        nonlocal sim_steps
+        sim_steps += int(round(info["duration_s"] / step_length))
+
+    def timed_out(run) -> bool:  # the agent's time is not the env's: only env.step counts
+        return stepping + run.stepping_s >= seconds
+
+    hooks = EpisodeHooks(on_step=count_steps, stop=timed_out)
     try:
-        t0 = time.perf_counter()
-        obs, info = env.reset(seed=0)
-        resetting += time.perf_counter() - t0
-        agent.reset(info)
         with _instrumented(env) as timers:
             while stepping < seconds:
-                action = agent.act(obs, info)  # the agent's time is not the env's
-                t0, c0 = time.perf_counter(), time.process_time()
-                obs, _, terminated, truncated, info = env.step(action)
-                stepping += time.perf_counter() - t0
-                cpu += time.process_time() - c0
-                decisions += 1
-                sim_steps += int(round(info["duration_s"] / step_length))
-                if terminated or truncated:
-                    episodes += 1
-                    t0 = time.perf_counter()
-                    obs, info = env.reset(seed=episodes)
-                    resetting += time.perf_counter() - t0
-                    agent.reset(info)
+                run = run_episode(env, agent, seed=episodes, hooks=hooks)
+                stepping += run.stepping_s
+                cpu += run.stepping_cpu_s
+                resetting += run.reset_s
+                decisions += run.decisions
+                episodes += run.ended
             latency = {name: latency_stats(t.times) for name, t in timers.items()}
             share = {name: round(sum(t.times) / stepping, 4) for name, t in timers.items()}
     finally:

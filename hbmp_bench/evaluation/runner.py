@@ -30,6 +30,7 @@ def run_job(job: Job) -> tuple[list[EpisodeRecord], float, int]:
     """Run a job's episodes in this process; returns (records, wall seconds, decisions)."""
     from hbmp_bench.agents import load_agent
     from hbmp_bench.envs.behavior_env import BehaviorEnv
+    from hbmp_bench.rollout import AgentFailed, EnvFailed, run_episode
 
     options = {} if job.fidelity is None else {"fidelity": job.fidelity}
     env = BehaviorEnv(town=job.town, task=job.task, suite=job.suite, **options)
@@ -38,14 +39,12 @@ def run_job(job: Job) -> tuple[list[EpisodeRecord], float, int]:
     start = time.perf_counter()
     try:
         for index in job.episodes:
-            obs, info = env.reset(seed=index, options={"episode_index": index})
-            agent.reset(info)
-            while True:
-                obs, _, terminated, truncated, info = env.step(agent.act(obs, info))
-                decisions += 1
-                if terminated or truncated:
-                    break
-            records.append(dataclasses.replace(EpisodeRecord(**info["episode"]), agent=job.agent))
+            try:
+                run = run_episode(env, agent, seed=index, options={"episode_index": index})
+            except (AgentFailed, EnvFailed) as exc:  # in-process debugging: the original error
+                raise exc.__cause__ from None
+            decisions += run.decisions
+            records.append(dataclasses.replace(EpisodeRecord(**run.record(env)), agent=job.agent))
     finally:
         env.close()
     return records, time.perf_counter() - start, decisions

@@ -10,7 +10,7 @@ import json
 def _cmd_record(args: argparse.Namespace) -> int:
     from PIL import Image
 
-    from hbmp_bench.render.video import record_episode
+    from hbmp_bench.envs.recording import record_episode
 
     town = {} if args.town is None else {"town": args.town}
     record = record_episode(args.env, args.agent, args.out, episode_index=args.episode, suite=args.suite,

@@ -15,7 +15,6 @@ Protocol (parent → worker, worker → parent):
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import traceback
 from dataclasses import dataclass
 from typing import Any
@@ -79,11 +78,9 @@ def make_env(config: WorkerEnvConfig):
 
     if config.env_id not in env_ids():
         raise UnknownNameError("env id", config.env_id, env_ids())
-    module_name, _, attr = config.entry_point.partition(":")
-    try:
-        factory = getattr(importlib.import_module(module_name), attr)
-    except (ImportError, AttributeError) as exc:
-        raise ValueError(f"cannot load environment class {config.entry_point!r}: {exc}") from exc
+    from hbmp_bench.plugins import resolve
+
+    factory = resolve(config.entry_point, "environment class")
     return factory(**{**gym.spec(config.env_id).kwargs, **config.kwargs})
 
 

@@ -28,7 +28,7 @@ import numpy as np
 from highway_env.road.lane import SineLane, StraightLane
 
 from hbmp_bench.envs.observation import ROAD_FEATURES, ObservationConfig, occupancy_grid
-from hbmp_bench.envs.world import BEHAVIORS, CHANGE_LEFT, CHANGE_RIGHT
+from hbmp_bench.planning.behaviors import BEHAVIORS, Behavior
 from hbmp_bench.planning.frame import Path
 from hbmp_bench.transfer.scenes import TransferScene
 
@@ -182,10 +182,10 @@ class HighwayAdapter:
         """(5,) int8: 1 where a behavior is feasible for R_t (lane changes need the target lane)."""
         mask = np.ones(len(BEHAVIORS), dtype=np.int8)
         if self.in_junction(ego.lane_index):
-            mask[CHANGE_LEFT] = mask[CHANGE_RIGHT] = 0
+            mask[Behavior.CHANGE_LEFT] = mask[Behavior.CHANGE_RIGHT] = 0
         else:
             left, right = self.neighbours(ego)
-            mask[CHANGE_LEFT], mask[CHANGE_RIGHT] = left is not None, right is not None
+            mask[Behavior.CHANGE_LEFT], mask[Behavior.CHANGE_RIGHT] = left is not None, right is not None
         return mask
 
     def road_profile(self, ego) -> tuple[np.ndarray, dict]:

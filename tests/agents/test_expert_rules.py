@@ -283,7 +283,7 @@ def test_the_planned_stop_is_longer_than_the_measured_speed_down_chain(fidelity)
     """The expert plans stops with ``Timing.stop_decel``: no shorter than a chain of speed_down
     really stops (measured in SUMO from the speed limit)."""
     from hbmp_bench.envs.stopping import measure_stop
-    from hbmp_bench.envs.world import WorldConfig
+    from hbmp_bench.envs.config import WorldConfig
 
     trace = measure_stop(WorldConfig(fidelity=fidelity), town="Town01")
     timing = Timing.for_period(1.0 if fidelity == "continuous" else 0.1, fidelity == "continuous")
