@@ -363,10 +363,12 @@ class SumoSim:
     def snapshot(self) -> Actors:
         """All inserted vehicles and pedestrians now (footprint centres)."""
         pos_, angle_, speed_ = tc.VAR_POSITION3D, tc.VAR_ANGLE, tc.VAR_SPEED
-        # a vehicle still waiting for its insertion has no valid 3D position (an invalid 2D one): not on the road
-        results = {i: r for group in (self._api.vehicle.getAllSubscriptionResults(),
-                                      self._api.person.getAllSubscriptionResults())
-                   for i, r in group.items() if len(r.get(pos_, ())) == 3}
+        # a vehicle still waiting for its insertion has no valid 3D position (an invalid 2D one): not on the
+        # road. Vehicles then persons, each sorted by id as libsumo gives them (TraCI keeps insertion order):
+        # the same order on both paths, so sums over actors are the same to the last bit
+        results = {i: group[i] for group in (self._api.vehicle.getAllSubscriptionResults(),
+                                             self._api.person.getAllSubscriptionResults())
+                   for i in sorted(group) if len(group[i].get(pos_, ())) == 3}
         ids = tuple(results)
         k = len(ids)
         rows = np.array([(*r[pos_], r[angle_], r[speed_]) for r in results.values()], dtype=float).reshape(k, 5)
