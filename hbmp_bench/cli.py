@@ -58,6 +58,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from hbmp_bench.agents import load_agent
     from hbmp_bench.evaluation import Job, run_jobs
     from hbmp_bench.metrics import success_table, summarize
+    from hbmp_bench.metrics.summary import SUCCESS_TABLE_TITLE, summary_lines
     from hbmp_bench.scenarios import get_suite
 
     town, task = _parse_env_id(args.env)
@@ -77,9 +78,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         summary["records"] = [r.to_dict() for r in records]
         print(json.dumps(summary, indent=2))
     else:
+        print(SUCCESS_TABLE_TITLE)
         print(success_table(records).to_string())
-        for key, value in summary.items():
-            print(f"{key:24s} {value}")
+        print()
+        print("\n".join(summary_lines(summary)))
     return 0
 
 

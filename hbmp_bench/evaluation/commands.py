@@ -66,7 +66,7 @@ def _add_selection(p: argparse.ArgumentParser, agent_default: str | None) -> Non
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from hbmp_bench.evaluation.evaluate import evaluate
     from hbmp_bench.metrics.report import records_frame, success_table
-    from hbmp_bench.metrics.summary import summarize
+    from hbmp_bench.metrics.summary import SUCCESS_TABLE_TITLE, summarize, summary_lines
 
     result = evaluate(args.suite, args.agent, towns=args.towns, tasks=args.tasks, episodes=args.episodes,
                       fidelity=args.fidelity, out_dir=args.out, workers=args.workers, backend=args.backend,
@@ -78,14 +78,15 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         print(json.dumps(summary, indent=2))
         return 0
     if result.records:
+        print(SUCCESS_TABLE_TITLE)
         print(success_table(records_frame(result.records)).to_string())
-    for key, value in summary.items():
-        print(f"{key:24s} {value}")
+        print()
+    print("\n".join(summary_lines(summary)))
     return 0
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from hbmp_bench.metrics.report import build_report, view_rows, write_report
+    from hbmp_bench.metrics.report import VIEW_LEGENDS, build_report, readable, view_rows, write_report
 
     rep = build_report(args.paths)
     first = Path(args.paths[0])
@@ -96,8 +97,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
                           **{name: view_rows(view) for name, view in rep.views.items()}}, indent=2))
         return 0
     for name, view in rep.views.items():
-        print(f"== {name}")
-        print(view.to_string() if not view.empty else "(no episodes)")
+        print(f"== {name}: {VIEW_LEGENDS[name]}")
+        print(readable(view).to_string() if not view.empty else "(no episodes)")
         print()
     print(f"written to {out}/ (CSV, markdown, failures.png, report.md)")
     return 0
