@@ -159,7 +159,8 @@ def build_parser() -> argparse.ArgumentParser:
     q = msub.add_parser("stats", help="statistics of built-in and imported maps")
     q.add_argument("names", nargs="*", help="maps to describe (default: every built-in and imported map)")
     q.add_argument("--json", action="store_true", help="print JSON")
-    q = msub.add_parser("import", help="import an OpenDRIVE .xodr or SUMO .net.xml under a name")
+    q = msub.add_parser("import", help="import an OpenDRIVE .xodr or SUMO .net.xml under a name (into "
+                        "$HBMP_BENCH_DATA/maps, or ~/.local/share/hbmp_bench/maps when it is unset)")
     q.add_argument("file", help="OpenDRIVE .xodr or SUMO .net.xml file")
     q.add_argument("--name", required=True, help="name to use it under (--town NAME)")
     q.add_argument("--like", default=None, help="built-in town whose task parameters (CoRL2017 traffic counts, "
