@@ -483,7 +483,8 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
     from tqdm import tqdm
 
     jobs = [("raw", t, None) for t in cfg.towns] + [("env", t, f) for t in cfg.towns for f in FIDELITIES]
-    jobs += [("highway", None, e) for e in (HIGHWAY_ENVS if cfg.highway_seconds > 0 else ())]
+    highway_missing = _missing("highway_env") if cfg.highway_seconds > 0 else ""
+    jobs += [("highway", None, e) for e in (HIGHWAY_ENVS if cfg.highway_seconds > 0 and not highway_missing else ())]
     jobs += [("scaling", None, n) for n in cfg.scaling_workers]
     ray_missing = _missing("ray") if cfg.ray_workers else ""
     jobs += [("ray", None, n) for n in (cfg.ray_workers if not ray_missing else ())]
@@ -513,6 +514,7 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
         "note": "shared, noisy machine; modest durations; see hbmp_bench.bench for the method",
         "towns": towns,
         "highway_env": highway,
+        "highway_env_skipped": highway_missing,
         "scaling": scaling,
         "ray_scaling": on_ray,
         "ray_skipped": ray_missing,
@@ -550,6 +552,8 @@ def format_table(result: dict) -> str:
         who = " Ray actor(s) " if r.get("backend") == "ray" else " worker(s) "
         lines.append(f"{str(r['workers']) + who + r['town'] + ' ' + r['fidelity'] + ' random':44s} "
                      f"{r['sim_steps_per_s']:12.1f} {r['decisions_per_s']:12.1f}   peak {r['peak_rss_mb_per_process']} MB/process")
+    if result.get("highway_env_skipped"):
+        lines.append(f"highway-env skipped: {result['highway_env_skipped']}")
     if result.get("ray_skipped"):
         lines.append(f"Ray scaling skipped: {result['ray_skipped']}")
     if result.get("import"):

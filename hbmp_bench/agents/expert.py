@@ -49,12 +49,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from hbmp_bench.agents.base import register_agent
-from hbmp_bench.envs.observation import ObservationConfig
-from hbmp_bench.planning.behaviors import BehaviorConfig, reference_speed
+from hbmp_bench.envs.observation import LANE_WIDTH_M, ObservationConfig
+from hbmp_bench.planning.behaviors import Behavior, BehaviorConfig, reference_speed
 from hbmp_bench.planning.executor import ExecutorConfig
 
-SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = range(5)
-LANE_WIDTH_M = 3.5
+SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = (int(b) for b in Behavior)
 EGO_LENGTH_M = 4.5
 """The ego's footprint length [m] (the ``hbmp_ego`` type)."""
 RED, YELLOW, GREEN = "rRu", "yY", "gGoOs"

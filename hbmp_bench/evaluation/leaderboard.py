@@ -18,7 +18,11 @@ Rules:
 - A results file whose suite definition hash differs from the installed suite's is refused
   (``StaleResultsError``) when it is added and when the README is generated: its episodes are not
   the current suite's.
-- Entries are ranked by success %, then driving score.
+- Complete entries are ranked by success %, then driving score. Partial runs are listed below them,
+  unranked and ordered by what they cover, never by their scores: full-suite runs with missing
+  episodes or sim errors first, then subsets; the most episodes first (a 2-episode run's 100 %
+  is not above a 200-episode run's 90 %). Every row shows its episodes as "scored of the whole
+  suite's".
 """
 
 from __future__ import annotations
@@ -34,7 +38,7 @@ from hbmp_bench.evaluation.integrity import BoardSnapshot
 from hbmp_bench.evaluation.provenance import git_commit, library_versions, machine_description, utc_now
 from hbmp_bench.evaluation.tasks import RunnerLimits, agent_slug, suite_tasks
 from hbmp_bench.metrics import report
-from hbmp_bench.metrics.records import SIM_ERROR, EpisodeRecord
+from hbmp_bench.metrics.records import DRIVING_SCORE_DEFINITION, SIM_ERROR, EpisodeRecord
 from hbmp_bench.metrics.summary import summarize
 from hbmp_bench.scenarios import TASK_LABELS, TASKS, get_suite
 
@@ -180,7 +184,20 @@ def load_entries(board_dir: str | os.PathLike, suite: str) -> list[dict]:
 
 
 def _rank_key(doc: dict) -> tuple:
+    """Order of complete entries: success %, then driving score, best first."""
     return (-doc["summary"].get("success_pct", 0.0), -doc["summary"].get("mean_driving_score", 0.0), doc["agent"])
+
+
+def _partial_key(doc: dict) -> tuple:
+    """Order of partial runs, by what they cover: full-suite runs (missing episodes or sim errors)
+    before subsets, then the most scored episodes first; scores only break ties."""
+    return (bool(doc.get("subset")), -doc["summary"].get("episodes", 0), *_rank_key(doc))
+
+
+def _suite_episodes(suite: str) -> int:
+    """Episodes of the whole suite (every town, task and episode)."""
+    spec = get_suite(suite)
+    return len(spec.towns) * len(spec.tasks) * spec.episodes_per_task
 
 
 def _row(doc: dict, rank: str) -> list[str]:
@@ -191,12 +208,15 @@ def _row(doc: dict, rank: str) -> list[str]:
         rank, f"`{doc['agent']}`", f"{s.get('success_pct', 0.0):.1f}",
         *(f"{by_task[t]:.1f}" if t in by_task else "–" for t in TASKS),
         f"{s.get('mean_driving_score', 0.0):.1f}", f"{100.0 * s.get('mean_route_completion', 0.0):.1f}",
-        "∞" if km is None else f"{km:.2f}", str(s.get("episodes", 0)),
+        NO_INFRACTION if km is None else f"{km:.2f}", f"{s.get('episodes', 0)} of {_suite_episodes(doc['suite'])}",
         str(doc.get("sim_errors", 0)),
         prov.get("package_version") or "", (prov.get("git_commit") or "")[:10], (prov.get("date_utc") or "")[:10],
         "" if prov.get("wall_time_s") is None else f"{prov['wall_time_s']:.0f}",
     ]
 
+
+NO_INFRACTION = "no infraction"
+"""km / infraction of an entry without any infraction event."""
 
 HEADER = ["rank", "agent", "success %", *(TASK_LABELS[t] + " %" for t in TASKS), "driving score",
           "route completion %", "km / infraction", "episodes", "sim errors", "version", "commit", "date", "wall s"]
@@ -219,10 +239,11 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
         f"{spec.description}\n",
         f"Suite definition hash `{spec.definition_hash()}`: {len(spec.towns)} towns × {len(spec.tasks)} tasks × "
         f"{spec.episodes_per_task} episodes. Generated from the `*.json` results files by "
-        f"`hbmp-bench leaderboard render --suite {spec.name}`; do not edit by hand. Ranked by success %, then "
-        "driving score (CARLA Leaderboard, 0–100); km / infraction counts collisions, wrong lane, off-road and "
-        "red lights; wall s is the submission's wall time with its `workers` (see each results file). Agent "
-        "errors count as failed episodes; sim errors (the simulator failed, not the agent) are not scored, and an "
+        f"`hbmp-bench leaderboard render --suite {spec.name}`; do not edit by hand. Complete entries are ranked by "
+        f"success % (episodes that reached the goal), then driving score: the mean over episodes of the "
+        f"{DRIVING_SCORE_DEFINITION}. km / infraction: km driven per infraction event (collisions, wrong lane, "
+        "off-road and red lights; an episode can have several); episodes: scored of the whole suite's; wall s is the "
+        "submission's wall time with its `workers` (see each results file). Agent errors count as failed episodes; sim errors (the simulator failed, not the agent) are not scored, and an "
         "entry with any is not ranked.\n",
     ]
     if not ranked:
@@ -233,8 +254,10 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
         parts.append(_table(_row(e, str(k)) for k, e in enumerate(group, start=1)))
     if partial:
         parts.append("## Partial runs (not ranked)\n")
-        parts.append("Subsets of the suite, or runs with missing episodes or sim errors.\n")
-        parts.append(_table(_row(e, "–") for e in sorted(partial, key=_rank_key)))
+        parts.append("Runs with missing episodes or sim errors, then subsets of the suite, listed by the episodes "
+                     "they cover (most first), not by score: their figures are over their own episodes only and do "
+                     "not compare with the ranked entries.\n")
+        parts.append(_table(_row(e, "–") for e in sorted(partial, key=_partial_key)))
     path = Path(board_dir) / spec.name / "README.md"
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")

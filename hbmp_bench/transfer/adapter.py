@@ -25,7 +25,14 @@ network (``lane.position``) along the ego's planned route. R_t has the SUMO sema
 from __future__ import annotations
 
 import numpy as np
-from highway_env.road.lane import SineLane, StraightLane
+
+try:
+    from highway_env.road.lane import SineLane, StraightLane
+except ModuleNotFoundError as exc:
+    if (exc.name or "").partition(".")[0] != "highway_env":
+        raise
+    raise ModuleNotFoundError("the highway-env transfer envs need highway-env, an optional extra: "
+                              "pip install 'hbmp-bench[highway-env]'", name=exc.name) from exc
 
 from hbmp_bench.envs.observation import ROAD_FEATURES, ObservationConfig, occupancy_grid
 from hbmp_bench.planning.behaviors import BEHAVIORS, Behavior
