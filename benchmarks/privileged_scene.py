@@ -5,8 +5,9 @@
 The expert drives one episode of Town01 NavigationDynamic (hbmp suite: lights, traffic,
 pedestrians) in a privileged env, and its actions are recorded. Both envs then replay those
 actions from the same reset, round after round in alternating order, so a loaded machine slows
-both alike; each replay has its own env, the only simulation open; only ``env.step`` is timed (no
-agent, no reset, no warm-up). Both replays see the same M_t and
+both alike; each replay has its own env, the only simulation open, so both run on libsumo (a second
+open one would run over TraCI, see :mod:`hbmp_bench.sim.sumo`); only ``env.step`` is timed (no agent,
+no reset, no warm-up). Both replays see the same M_t and
 R_t (``tests/envs/test_privileged.py``).
 """
 

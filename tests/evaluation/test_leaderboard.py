@@ -109,7 +109,7 @@ def test_a_corl2017_subset_is_written_apart_and_not_ranked(tmp_path, capsys):
     assert doc["selection"] == {"towns": ["Town01"], "tasks": ["Straight"], "episodes": [0]}
     readme = (tmp_path / "corl2017" / "README.md").read_text()
     assert "No complete entries yet." in readme
-    assert "## Partial runs (not ranked)" in readme and "| – | `expert` | 100.0" in readme
+    assert "## Partial runs (not ranked)" in readme and "| – | `expert` | yes | 100.0" in readme
 
 
 def test_each_fidelity_has_its_own_entry(tmp_path):
