@@ -289,7 +289,7 @@ def measure_raw_sumo(cfg: BenchConfig, town: str) -> dict:
 
 def measure_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float | None = None) -> dict:
     """The env with the expert for ``seconds`` of stepping: sim steps/s, decisions/s, in-place latencies."""
-    from hbmp_bench.agents import load_agent
+    from hbmp_bench.agents import agent_env_kwargs, load_agent
 
     seconds = cfg.env_seconds if seconds is None else seconds
     warm_up_s = warm_up_kernels()
