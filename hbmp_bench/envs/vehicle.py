@@ -473,8 +473,8 @@ class GoalRoute:
         """The traffic lights ahead along the route, nearest first, up to ``LIGHTS_RANGE_M``
         (distance from the front bumper to the stop line [m]); with ``first_only`` the nearest
         alone (R_t's). At the end of the followed lane, its link's (the one the detectors judge);
-        beyond, those of the links the route takes. SUMO's own next lights (``getNextTLS``) follow SUMO's map matching of a pushed
-        pose, which may jump to another visit of a junction."""
+        beyond, those of the links the route takes. SUMO's own next lights (``getNextTLS``) follow
+        SUMO's map matching of a pushed pose, which may jump to another visit of a junction."""
         v = self.v
         net, sim, lane = v.shared.net, v.shared.sim, v.followed_lane
         k, at = self._route_position()
