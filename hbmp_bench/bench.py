@@ -52,6 +52,7 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -251,10 +252,12 @@ def _instrumented(env):
         executor_module.plan, vehicle_module.road_profile = saved
 
 
-def _make_env(cfg: BenchConfig, town: str, fidelity: str):
+def _make_env(cfg: BenchConfig, town: str, fidelity: str, **agent_env: Any):
+    """The measured env; ``agent_env``: the options of the agent that drives it (``agent_env_kwargs``)."""
     from hbmp_bench.envs.behavior_env import BehaviorEnv
 
-    return BehaviorEnv(town=town, task=cfg.task, suite=cfg.suite, episode_index=cfg.episode_index, fidelity=fidelity)
+    return BehaviorEnv(town=town, task=cfg.task, suite=cfg.suite, episode_index=cfg.episode_index, fidelity=fidelity,
+                       **agent_env)
 
 
 def warm_up_kernels() -> float:
@@ -286,12 +289,12 @@ def measure_raw_sumo(cfg: BenchConfig, town: str) -> dict:
 
 def measure_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float | None = None) -> dict:
     """The env with the expert for ``seconds`` of stepping: sim steps/s, decisions/s, in-place latencies."""
-    from hbmp_bench.agents import load_agent
+    from hbmp_bench.agents import agent_env_kwargs, load_agent
 
     seconds = cfg.env_seconds if seconds is None else seconds
     warm_up_s = warm_up_kernels()
-    env = _make_env(cfg, town, fidelity)
     agent = load_agent("expert")
+    env = _make_env(cfg, town, fidelity, **agent_env_kwargs(agent))
     step_length = env.config.step_length_s
     decisions = sim_steps = episodes = 0
     stepping = resetting = cpu = 0.0

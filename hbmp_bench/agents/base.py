@@ -26,6 +26,17 @@ class Agent(Protocol):
 
 AGENTS: dict[str, Callable[..., Agent]] = {}
 
+PRIVILEGED_OPTION = "privileged"
+"""The env option an agent sets to True in its ``env_kwargs`` to read the privileged fields of
+``info["scene"]`` (``WorldConfig.privileged``); an evaluation that grants it is marked privileged."""
+
+
+def agent_env_kwargs(agent: Any) -> dict[str, Any]:
+    """The env options ``agent`` asks for: its optional ``env_kwargs`` attribute (the observation
+    kind a policy was trained on; ``privileged: True`` for the rule-based expert). Every runner
+    builds the agent's env with them (the isolated evaluation through ``with_agent_env``)."""
+    return dict(getattr(agent, "env_kwargs", None) or {})
+
 
 def register_agent(name: str) -> Callable[[Callable[..., Agent]], Callable[..., Agent]]:
     """Class decorator adding an agent factory under ``name``."""

@@ -58,6 +58,8 @@ class BehaviorEnv(gym.Env):
     observation: ``deformed`` or ``vehicle_centric`` M_t; grid options via ``observation_config``.
     density: override background traffic (``empty``, ``corl``, ``regular``, ``dense``); another
         value raises ValueError here.
+    privileged: add the privileged fields to ``info["scene"]`` (the rule-based expert's; see
+        :class:`WorldConfig`); default off.
 
     ## Implementation
     The parallel env (:class:`~hbmp_bench.envs.traffic_v0.TrafficParallelEnv`) with no background
@@ -83,6 +85,7 @@ class BehaviorEnv(gym.Env):
         observation_config: ObservationConfig | None = None,
         density: str | None = None,
         render_mode: str | None = None,
+        privileged: bool = False,
     ):
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None, 'rgb_array'")
@@ -90,7 +93,7 @@ class BehaviorEnv(gym.Env):
             town=town, task=task, suite=suite, episode_index=episode_index, random_goals=random_goals,
             density=density, controlled="none", ego_fidelity=WorldConfig.fidelity if fidelity is None else fidelity,
             reward=reward, decision_period_s=decision_period_s, observation=observation,
-            observation_config=observation_config, render_mode=render_mode)
+            observation_config=observation_config, render_mode=render_mode, privileged=privileged)
         self.action_space = self.parallel.action_space(EGO_ID)
         self.observation_space = self.parallel.observation_space(EGO_ID)
         self.render_mode = render_mode

@@ -119,6 +119,11 @@ class WorldConfig:
         background_route_m: length of the chained route each background vehicle gets, long
             enough that it circulates for the whole episode [m].
         step_length_s: SUMO step [s] (the planner's control period in continuous fidelity).
+        privileged: add the privileged fields of :mod:`hbmp_bench.envs.privileged` to the ego's
+            ``info["scene"]`` (light schedules, junction foes, pedestrians, leader, crossings:
+            what the rule-based expert, a demonstrator, reads). Off by default: a learned agent
+            sees M_t, R_t and the scene's R_t quantities only, and no step pays for the rest. An
+            evaluated agent asks for it through its ``env_kwargs``; its results are marked.
     """
 
     fidelity: str = "continuous"
@@ -131,8 +136,11 @@ class WorldConfig:
     continuous: ContinuousConfig = field(default_factory=ContinuousConfig)
     background_route_m: float = 4000.0
     step_length_s: float = 0.1
+    privileged: bool = False
 
     def __post_init__(self):
+        if not isinstance(self.privileged, bool):
+            raise ValueError(f"privileged must be True or False, got {self.privileged!r}")
         if self.fidelity not in FIDELITIES:
             raise ValueError(f"fidelity must be one of {FIDELITIES}, got {self.fidelity!r}")
         if self.ego_driver not in EGO_DRIVERS:

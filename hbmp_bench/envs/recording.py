@@ -44,7 +44,8 @@ def record_episode(
         every: keep every ``every``-th frame (>= 1) to keep files small.
         fps: playback rate; default real time (``1 / (step length * every)``).
         progress: show a progress bar of decisions.
-        env_kwargs: further ``gymnasium.make`` options of the env.
+        env_kwargs: further ``gymnasium.make`` options of the env; the agent's own
+            (``agents.agent_env_kwargs``, e.g. the expert's ``privileged=True``) are added.
 
     Returns:
         The episode record as a dict (``EpisodeRecord`` fields; the record so far when
@@ -52,7 +53,7 @@ def record_episode(
     """
     from tqdm import tqdm
 
-    from hbmp_bench.agents import load_agent
+    from hbmp_bench.agents import agent_env_kwargs, load_agent
     from hbmp_bench.envs.registration import TRAINING_ID, make
 
     path = check_video_path(path)
@@ -63,7 +64,7 @@ def record_episode(
     if fps is not None and not (np.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be finite and > 0, got {fps!r}")
     policy = load_agent(agent)
-    kwargs = dict(env_kwargs, render_mode="rgb_array", suite=suite)
+    kwargs = dict(agent_env_kwargs(policy), **env_kwargs, render_mode="rgb_array", suite=suite)
     if env_id != TRAINING_ID:
         kwargs["episode_index"] = episode_index
     if fidelity is not None:

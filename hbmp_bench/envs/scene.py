@@ -1,5 +1,6 @@
-"""The scene: what a privileged reader (the rule-based expert, a demonstrator) sees besides M_t
-and R_t. Built typed by the vehicle (:class:`~hbmp_bench.envs.vehicle.ControlledVehicle`), handed to
+"""The scene: R_t's quantities in metres and m/s, and for a privileged reader (the rule-based
+expert, a demonstrator, in a world with ``WorldConfig.privileged``) what it sees besides M_t and
+R_t. Built typed by the vehicle (:class:`~hbmp_bench.envs.vehicle.ControlledVehicle`), handed to
 agents as a plain dict at the info boundary (``info["scene"] = scene.to_dict()``: data only, it
 crosses the evaluation's agent channel), where the fields a vehicle does not have are left out.
 """
@@ -8,6 +9,11 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass
+
+
+NON_PRIVILEGED_FIELDS = ("speed_mps", "speed_limit_mps", "in_junction", "route_lane_offset", "stop_distance_m",
+                         "lane_pos_m", "light", "turn_ahead", "goal_distance_m")
+"""The scene fields every world fills (R_t's quantities; the ego's goal distance)."""
 
 
 @dataclass(frozen=True)
@@ -23,10 +29,15 @@ class Scene:
         light: signal char of the light at the end of its lane ("" none; in a junction the next one).
         turn_ahead: SUMO direction of the route's next link (``s``, ``l``, ``r``, ...; "" none).
 
-    The ego only (None elsewhere; see :mod:`hbmp_bench.envs.privileged` for each):
-        goal_distance_m, leader_gap_m, leader_speed_mps, pedestrians, lights_ahead,
-        route_lane_light, junction_exit_m, junction_foes, crossings, fidelity; and in continuous
-        fidelity lane_error_m, heading_error_rad, curvature_ahead.
+    The ego only (None elsewhere):
+        goal_distance_m: straight-line distance from its centre to the goal. Not privileged: it
+            follows from the ego's own pose and the episode's goal, no other actor's state and
+            nothing of the future.
+
+    The ego in a world with ``WorldConfig.privileged`` only (see :mod:`hbmp_bench.envs.privileged`
+    for each): leader_gap_m, leader_speed_mps, pedestrians, lights_ahead, route_lane_light,
+    junction_exit_m, junction_foes, crossings, fidelity; and in continuous fidelity
+    lane_error_m, heading_error_rad, curvature_ahead.
     """
 
     speed_mps: float

@@ -41,7 +41,9 @@ the part of the behavior its end cut short. The ego ends by its episode's rules 
 a background agent is terminated by its own collision or by leaving the network (its vehicle then
 leaves SUMO); when the ego's episode ends every other live agent is truncated.
 ``info``: ``decision_required``, ``action_mask``, ``events`` and ``infractions`` (its own),
-``scene`` (privileged quantities the expert reads), ``reward_components``, ``time_s``.
+``scene`` (R_t's quantities in metres and m/s, :class:`~hbmp_bench.envs.scene.Scene`; the ego's
+with its straight-line goal distance, and with ``privileged=True`` the privileged fields the
+expert reads), ``reward_components``, ``time_s``.
 
 ## Bad input
 An action for an agent that is not live (unknown or finished) raises ValueError naming the live
@@ -103,6 +105,8 @@ class TrafficParallelEnv(ParallelEnv):
         observation: ``deformed`` or ``vehicle_centric`` M_t; grid options via ``observation_config``.
         render_mode: None or ``rgb_array`` (:meth:`render`: the ego-centred top-down view, with
             every vehicle and pedestrian; :meth:`drain_frames`: one picture per SUMO step).
+        privileged: add the privileged fields to the ego's ``info["scene"]`` (for the rule-based
+            expert; see :class:`~hbmp_bench.envs.config.WorldConfig`).
     """
 
     metadata = {"name": "hbmp_traffic_v0", "render_modes": ["rgb_array"], "render_fps": 10, "is_parallelizable": True}
@@ -112,14 +116,15 @@ class TrafficParallelEnv(ParallelEnv):
                  ego_fidelity: str = "continuous", background_fidelity: str = "event", reward: str = "dense",
                  density: str | None = None, observation: str = "deformed", render_mode: str | None = None,
                  random_goals: bool = False, decision_period_s: float = 0.1,
-                 observation_config: ObservationConfig | None = None, ego_driver: str = "behavior"):
+                 observation_config: ObservationConfig | None = None, ego_driver: str = "behavior",
+                 privileged: bool = False):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None, 'rgb_array'")
         self.scenario = ScenarioConfig(town=town, task=task, suite=suite, episode_index=episode_index,
                                        random_goals=random_goals, density=density)
         obs_cfg = observation_config or ObservationConfig(kind=observation)
         self.config = WorldConfig(fidelity=ego_fidelity, ego_driver=ego_driver, background_fidelity=background_fidelity, reward=reward,
-                                  decision_period_s=decision_period_s, observation=obs_cfg)
+                                  decision_period_s=decision_period_s, observation=obs_cfg, privileged=privileged)
         self.n_controlled = _controlled_count(controlled, self.scenario.least_vehicles)
         self.possible_agents = [EGO_ID, *(f"bg{k}" for k in range(self.n_controlled))]
         self.agents: list[str] = []

@@ -7,7 +7,8 @@ infraction detector, its observation (M_t, R_t and the scene) and its reward. It
 
 - :class:`GoalRoute` (the ego): the episode's route to its goal, re-planned towards the goal when
   the followed lane cannot continue it; progress along it; R_t's lights are those along the route;
-  the privileged scene fields of :mod:`hbmp_bench.envs.privileged`.
+  the privileged scene fields of :mod:`hbmp_bench.envs.privileged` when the world asks for them
+  (``WorldConfig.privileged``).
 - :class:`LoopRoute` (a background agent): a long chain of random legs, extended before it runs
   out and re-planned from where the lane leads, so the vehicle circulates for the whole episode;
   R_t's light is SUMO's next light on its route.
@@ -295,11 +296,16 @@ class GoalRoute:
 
     Args:
         episode: the episode (route, start and goal lanes, goal position, route length).
-        fidelity: the driver's (reported in the scene).
+        fidelity: the driver's (reported in the privileged scene).
+        privileged: add the privileged fields to the scene (``WorldConfig.privileged``); without,
+            :class:`~hbmp_bench.envs.privileged.PrivilegedScene` is never built nor asked.
     """
 
-    def __init__(self, episode: Episode, fidelity: str):
+    def __init__(self, episode: Episode, fidelity: str, privileged: bool = False):
         self.episode, self.fidelity = episode, fidelity
+        self.privileged: PrivilegedScene | None = None
+        """Builds the privileged fields of the scene (:mod:`hbmp_bench.envs.privileged`); None: left out."""
+        self._wants_privileged = privileged
         self.v: ControlledVehicle | None = None
         self.reroutes = 0
 
@@ -307,9 +313,9 @@ class GoalRoute:
         self.v = vehicle
         net, ep = vehicle.shared.net, self.episode
         self.goal_xy = net.position(ep.goal_lane, ep.goal_pos)
-        self.privileged = PrivilegedScene(net, vehicle.shared.sim, vehicle.id, vehicle.vtype, self.fidelity,
-                                          getattr(vehicle.driver, "lane_path", None))
-        """Builds the privileged fields of the scene (:mod:`hbmp_bench.envs.privileged`)."""
+        if self._wants_privileged:
+            self.privileged = PrivilegedScene(net, vehicle.shared.sim, vehicle.id, vehicle.vtype, self.fidelity,
+                                              getattr(vehicle.driver, "lane_path", None))
         self.score = EpisodeScorer(ep.route_length_m, vehicle.state.xy)
         """Distance, progress along the route and the episode record."""
         self._set(ep.route)
@@ -387,16 +393,20 @@ class GoalRoute:
 
     # -------------------------------------------------------------- observe
     def road_profile(self) -> tuple[np.ndarray, Scene]:
-        """R_t (10,) and the scene with the privileged fields."""
+        """R_t (10,) and the scene: R_t's quantities and the straight-line distance to the goal,
+        plus the privileged fields when the world asks for them."""
         v, ep = self.v, self.episode
         ego, net = v.state, v.shared.net
-        lights = self._route_lights()
+        lights = self._route_lights(first_only=self.privileged is None)
         lane, lane_pos = self._profile_lane()
         road, scene = road_profile(net, lane, lane_pos, self.edges, self.index(), ep.goal_lane, ego.speed,
                                    lights[0] if lights else None, ep.goal_pos)
+        goal_distance_m = float(np.hypot(*(ego.xy - self.goal_xy)))
+        if self.privileged is None:
+            return road, Scene(**scene, goal_distance_m=goal_distance_m)
         privileged = self.privileged.fields(ego, v.followed_lane, v.next_edges(), v.actors, lights,
                                             self._junction_exit_m())
-        return road, Scene(**scene, **privileged, goal_distance_m=float(np.hypot(*(ego.xy - self.goal_xy))),
+        return road, Scene(**scene, **privileged, goal_distance_m=goal_distance_m,
                            route_lane_light=self._route_lane_light(lane, scene["route_lane_offset"]))
 
     def _profile_lane(self) -> tuple[str, float]:
@@ -459,12 +469,12 @@ class GoalRoute:
         tls, index = fixed[2], fixed[3]
         return (self._to_stop_line(lane), sim.light_state(tls, index), sim.signal_schedule(tls, index))
 
-    def _route_lights(self) -> list[LightAhead]:
+    def _route_lights(self, first_only: bool = False) -> list[LightAhead]:
         """The traffic lights ahead along the route, nearest first, up to ``LIGHTS_RANGE_M``
-        (distance from the front bumper to the stop line [m]). At the end of the
-        followed lane, its link's (the one the detectors judge); beyond, those of the links the
-        route takes. SUMO's own next lights (``getNextTLS``) follow SUMO's map matching of a pushed
-        pose, which may jump to another visit of a junction."""
+        (distance from the front bumper to the stop line [m]); with ``first_only`` the nearest
+        alone (R_t's). At the end of the followed lane, its link's (the one the detectors judge);
+        beyond, those of the links the route takes. SUMO's own next lights (``getNextTLS``) follow
+        SUMO's map matching of a pushed pose, which may jump to another visit of a junction."""
         v = self.v
         net, sim, lane = v.shared.net, v.shared.sim, v.followed_lane
         k, at = self._route_position()
@@ -476,7 +486,7 @@ class GoalRoute:
         ahead = self._to_stop_line(lane)
         if fixed is not None and ahead > 0.0:
             out.append(LightAhead(fixed[2], fixed[3], ahead, sim.light_state(fixed[2], fixed[3])))
-        if nxt is None:
+        if nxt is None or (first_only and out):
             return out
         own = next((c for c in net.connections[net.lane(lane).edge] if c.from_lane == lane and c.to_edge == nxt), None)
         to_lane = (own or net.route_link(self.edges[k], nxt, lane)).to_lane
@@ -487,5 +497,7 @@ class GoalRoute:
             link = net.route_link(self.edges[j], self.edges[j + 1], to_lane)
             if link.tls:
                 out.append(LightAhead(link.tls, link.link_index, distance, sim.light_state(link.tls, link.link_index)))
+                if first_only:
+                    return out
             to_lane = link.to_lane
         return out

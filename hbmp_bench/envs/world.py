@@ -97,7 +97,7 @@ class DrivingWorld:
         if self.sim.vehicle_state(EGO_ID) is None:
             raise RuntimeError(f"SUMO did not insert the ego for {episode.key}")
         self.ego = ControlledVehicle(
-            EGO_ID, EGO_TYPE, self.ego_driver, shared, GoalRoute(episode, self.config.fidelity),
+            EGO_ID, EGO_TYPE, self.ego_driver, shared, GoalRoute(episode, self.config.fidelity, self.config.privileged),
             InfractionDetector(self.locator, goal_xy, episode.success_radius_m, episode.timeout_s),
             EndRules(on_collision=episode.end_on_collision, on_violation=episode.end_on_violation))
         self.vehicles = {EGO_ID: self.ego}

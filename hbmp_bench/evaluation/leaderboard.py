@@ -23,6 +23,10 @@ Rules:
   episodes or sim errors first, then subsets; the most episodes first (a 2-episode run's 100 %
   is not above a 200-episode run's 90 %). Every row shows its episodes as "scored of the whole
   suite's".
+- An entry whose agent read the privileged scene fields (it asked for ``privileged=True``, as the
+  rule-based expert does: light schedules, junction foes, the leader; see
+  ``hbmp_bench.envs.privileged``) is marked ``privileged`` in its results file and in the
+  README's tables: it is a reference, not comparable with an agent that sees M_t and R_t only.
 """
 
 from __future__ import annotations
@@ -42,8 +46,8 @@ from hbmp_bench.metrics.records import DRIVING_SCORE_DEFINITION, SIM_ERROR, Epis
 from hbmp_bench.metrics.summary import summarize
 from hbmp_bench.scenarios import TASK_LABELS, TASKS, get_suite
 
-RESULTS_FORMAT = 1
-"""Version of the results file layout."""
+RESULTS_FORMAT = 2
+"""Version of the results file layout (2: the ``privileged`` flag)."""
 
 EPISODE_COLUMNS = (
     "town", "task", "episode", "seed", "success", "route_completion", "driving_score", "collision_vehicle",
@@ -84,8 +88,10 @@ def results_document(
     wall_s: float | None = None,
     workers: int | None = None,
     backend: str = "process",
+    privileged: bool = False,
 ) -> dict:
-    """The results file content for ``records`` of a selection of ``suite``."""
+    """The results file content for ``records`` of a selection of ``suite``; ``privileged``: the
+    agent read the privileged scene fields (``EvaluationResult.privileged``)."""
     spec = get_suite(suite)
     full = (set(towns) == set(spec.towns) and set(tasks) == set(spec.tasks)
             and list(episodes) == list(range(spec.episodes_per_task)))
@@ -109,6 +115,7 @@ def results_document(
         "suite_hash": spec.definition_hash(),
         "agent": agent,
         "fidelity": fidelity,
+        "privileged": bool(privileged),
         "complete": full and len(records) == expected and sim_errors == 0,
         "subset": not full,
         "selection": {"towns": list(towns), "tasks": list(tasks), "episodes": list(episodes)},
@@ -139,6 +146,8 @@ def check_results(doc: dict, source: str = "results") -> dict:
     agree with its episodes; else a clear error."""
     if not isinstance(doc, dict) or doc.get("format") != RESULTS_FORMAT or "suite" not in doc:
         raise ValueError(f"{source} is not a leaderboard results file (format {RESULTS_FORMAT})")
+    if not isinstance(doc.get("privileged"), bool):
+        raise ValueError(f"{source} has no privileged flag (true or false)")
     episodes = doc.get("episodes")
     if not isinstance(episodes, list) or not all(isinstance(e, dict) for e in episodes):
         raise ValueError(f"{source} has no list of episodes")
@@ -205,7 +214,7 @@ def _row(doc: dict, rank: str) -> list[str]:
     by_task = doc["aggregates"].get("success_pct_by_task", {})
     km = s.get("km_per_infraction")
     return [
-        rank, f"`{doc['agent']}`", f"{s.get('success_pct', 0.0):.1f}",
+        rank, f"`{doc['agent']}`", "yes" if doc["privileged"] else "no", f"{s.get('success_pct', 0.0):.1f}",
         *(f"{by_task[t]:.1f}" if t in by_task else "–" for t in TASKS),
         f"{s.get('mean_driving_score', 0.0):.1f}", f"{100.0 * s.get('mean_route_completion', 0.0):.1f}",
         NO_INFRACTION if km is None else f"{km:.2f}", f"{s.get('episodes', 0)} of {_suite_episodes(doc['suite'])}",
@@ -218,7 +227,7 @@ def _row(doc: dict, rank: str) -> list[str]:
 NO_INFRACTION = "no infraction"
 """km / infraction of an entry without any infraction event."""
 
-HEADER = ["rank", "agent", "success %", *(TASK_LABELS[t] + " %" for t in TASKS), "driving score",
+HEADER = ["rank", "agent", "privileged", "success %", *(TASK_LABELS[t] + " %" for t in TASKS), "driving score",
           "route completion %", "km / infraction", "episodes", "sim errors", "version", "commit", "date", "wall s"]
 
 
@@ -244,7 +253,9 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
         f"{DRIVING_SCORE_DEFINITION}. km / infraction: km driven per infraction event (collisions, wrong lane, "
         "off-road and red lights; an episode can have several); episodes: scored of the whole suite's; wall s is the "
         "submission's wall time with its `workers` (see each results file). Agent errors count as failed episodes; sim errors (the simulator failed, not the agent) are not scored, and an "
-        "entry with any is not ranked.\n",
+        "entry with any is not ranked. An agent marked privileged read the simulator's privileged scene (light "
+        "schedules, junction foes, the leader; the rule-based expert, a reference): not comparable with an agent "
+        "that sees M_t and R_t only.\n",
     ]
     if not ranked:
         parts.append("No complete entries yet.\n")
@@ -311,6 +322,7 @@ def submit(
         towns=list(dict.fromkeys(t.town for t in selection)), tasks=list(dict.fromkeys(t.task for t in selection)),
         episodes=sorted({t.episode for t in selection}), fidelity=selection[0].fidelity,
         wall_s=result.wall_s if result.skipped == 0 else None, workers=workers or os.cpu_count(), backend=backend,
+        privileged=result.privileged,
     )
     snapshot.check_unchanged()
     path = write_json(entry_path(board_dir, spec.name, agent, doc["subset"], doc["fidelity"]), doc)

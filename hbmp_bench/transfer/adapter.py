@@ -74,7 +74,7 @@ def mirror(xy: np.ndarray) -> np.ndarray:
 
 
 class HighwayAdapter:
-    """M_t, R_t, the privileged ``scene`` dict and the action mask for the ego of one highway-env
+    """M_t, R_t, the ``scene`` dict and the action mask for the ego of one highway-env
     episode. Build a new one for every episode (highway-env rebuilds its road on reset).
 
     Args:
@@ -196,7 +196,8 @@ class HighwayAdapter:
         return mask
 
     def road_profile(self, ego) -> tuple[np.ndarray, dict]:
-        """R_t (10,) float32 and the privileged ``scene`` dict (metres, m/s) the expert reads."""
+        """R_t (10,) float32 and the ``scene`` dict (metres, m/s): R_t's quantities and the goal
+        distance, the non-privileged fields of :class:`~hbmp_bench.envs.scene.Scene`."""
         r = np.zeros(len(ROAD_FEATURES), dtype=np.float32)
         index = ego.lane_index
         lane = self.network.get_lane(index)

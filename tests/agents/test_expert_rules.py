@@ -7,6 +7,7 @@ The crafted situations are ``(observation, info)`` pairs as the world builds the
 import numpy as np
 import pytest
 
+from hbmp_bench.agents import agent_env_kwargs
 from hbmp_bench.agents.expert import CHANGE_LEFT, CHANGE_RIGHT, KEEP, SPEED_DOWN, SPEED_UP, ExpertAgent, Timing
 from hbmp_bench.envs.observation import ObservationConfig
 
@@ -302,8 +303,8 @@ def test_the_planned_stop_is_longer_than_the_measured_speed_down_chain(fidelity)
 def test_the_expert_drives_real_episodes_lawfully(town, task, episode, fidelity):
     from hbmp_bench.envs import BehaviorEnv
 
-    env = BehaviorEnv(town=town, task=task, suite="hbmp", fidelity=fidelity)
     agent = ExpertAgent()
+    env = BehaviorEnv(town=town, task=task, suite="hbmp", fidelity=fidelity, **agent_env_kwargs(agent))
     try:
         obs, info = env.reset(seed=episode, options={"episode_index": episode})
         agent.reset(info)

@@ -45,11 +45,11 @@ def _feed(h, agent: str, action: int, reward: float, obs: dict, term: bool, trun
 
 
 def run_single(town: str, task: str, index: int, fidelity: str) -> dict:
-    from hbmp_bench.agents import load_agent
+    from hbmp_bench.agents import agent_env_kwargs, load_agent
     from hbmp_bench.envs import BehaviorEnv
 
-    env = BehaviorEnv(town=town, task=task, fidelity=fidelity)
     agent = load_agent("expert")
+    env = BehaviorEnv(town=town, task=task, fidelity=fidelity, **agent_env_kwargs(agent))
     h = hashlib.sha256()
     try:
         obs, info = env.reset(seed=index, options={"episode_index": index})
@@ -70,11 +70,12 @@ def run_single(town: str, task: str, index: int, fidelity: str) -> dict:
 
 def run_multi(town: str, task: str, index: int, controlled: int, ego_fidelity: str, background_fidelity: str,
               max_steps: int) -> dict:
-    from hbmp_bench.agents import load_agent
+    from hbmp_bench.agents import agent_env_kwargs, load_agent
     from hbmp_bench.envs import traffic_v0
 
     env = traffic_v0.parallel_env(town=town, task=task, episode_index=index, controlled=controlled,
-                                  ego_fidelity=ego_fidelity, background_fidelity=background_fidelity)
+                                  ego_fidelity=ego_fidelity, background_fidelity=background_fidelity,
+                                  **agent_env_kwargs(load_agent("expert")))
     h = hashlib.sha256()
     try:
         obs, infos = env.reset(seed=index)

@@ -51,3 +51,9 @@ def test_scene_dict_leaves_out_what_a_vehicle_does_not_have():
     assert ego.to_dict() == {**base, "goal_distance_m": 80.0, "route_lane_light": (), "pedestrians": ()}
     with pytest.raises(TypeError):
         Scene(**base, speed=1.0)  # a misspelt field fails where the scene is built
+
+
+def test_privileged_is_a_bool_and_off_by_default():
+    assert WorldConfig().privileged is False and WorldConfig(privileged=True).privileged is True
+    with pytest.raises(ValueError, match="privileged must be True or False"):
+        WorldConfig(privileged=1)

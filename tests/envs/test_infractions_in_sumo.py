@@ -7,7 +7,7 @@ import libsumo
 import numpy as np
 import pytest
 
-from hbmp_bench.agents import load_agent
+from hbmp_bench.agents import agent_env_kwargs, load_agent
 from hbmp_bench.envs import BehaviorEnv
 from hbmp_bench.envs.config import WorldConfig
 from hbmp_bench.envs.world import EGO_ID, DrivingWorld
@@ -202,8 +202,8 @@ def test_expert_stops_at_red_lights_and_drives_a_clean_episode():
     light at least once, reaches the goal and no detector fires. The first light starts in the phase
     that serves the cross street (its program runs on from there), so the ego meets a red whatever
     the towns' green times."""
-    env = BehaviorEnv(town="Town01", task="Straight", episode_index=0)
     agent = load_agent("expert")
+    env = BehaviorEnv(town="Town01", task="Straight", episode_index=0, **agent_env_kwargs(agent))
     obs, info = env.reset(seed=0)
     ep = env.world.episode
     assert ep == _three_light_episode(env.world.net)
