@@ -47,7 +47,8 @@ from hbmp_bench.metrics.summary import summarize
 from hbmp_bench.scenarios import TASK_LABELS, TASKS, get_suite
 
 RESULTS_FORMAT = 2
-"""Version of the results file layout (2: the ``privileged`` flag)."""
+"""Version of the results file layout (2: the ``privileged`` flag). A format-1 file reads as
+privileged: before the flag every agent was handed the privileged scene fields."""
 
 EPISODE_COLUMNS = (
     "town", "task", "episode", "seed", "success", "route_completion", "driving_score", "collision_vehicle",
@@ -143,7 +144,10 @@ def results_document(
 
 def check_results(doc: dict, source: str = "results") -> dict:
     """``doc`` if it is a results file of the installed suite whose ``complete`` and ``sim_errors``
-    agree with its episodes; else a clear error."""
+    agree with its episodes; else a clear error. A format-1 file is read as format 2 with
+    ``privileged`` true (see :data:`RESULTS_FORMAT`)."""
+    if isinstance(doc, dict) and doc.get("format") == 1 and "privileged" not in doc:
+        doc = {**doc, "format": RESULTS_FORMAT, "privileged": True}
     if not isinstance(doc, dict) or doc.get("format") != RESULTS_FORMAT or "suite" not in doc:
         raise ValueError(f"{source} is not a leaderboard results file (format {RESULTS_FORMAT})")
     if not isinstance(doc.get("privileged"), bool):

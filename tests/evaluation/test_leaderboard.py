@@ -89,6 +89,19 @@ def test_a_stale_results_file_is_refused_with_a_clear_message(board, tmp_path):
     assert main(["leaderboard", "render", "--suite", tiny_suite.NAME, "--board-dir", str(copy)]) == 2
 
 
+def test_a_format_1_results_file_reads_as_privileged(board, tmp_path):
+    """Before the privileged flag (results format 2) every agent was handed the privileged scene."""
+    path = entry_path(board, tiny_suite.NAME, "keep", subset=False, fidelity=FIDELITY)
+    doc = json.loads(path.read_text())
+    assert doc["format"] == 2 and doc["privileged"] is False
+    old = {k: v for k, v in doc.items() if k != "privileged"} | {"format": 1}
+    legacy = tmp_path / "legacy.json"
+    legacy.write_text(json.dumps(old))
+    target = add_results(legacy, tmp_path / "board")
+    assert [(e["agent"], e["privileged"]) for e in load_entries(tmp_path / "board", tiny_suite.NAME)] == [("keep", True)]
+    assert target.exists()
+
+
 def test_add_installs_a_checked_results_file(board, tmp_path):
     target = add_results(entry_path(board, tiny_suite.NAME, "expert", subset=False, fidelity=FIDELITY), tmp_path)
     assert target == entry_path(tmp_path, tiny_suite.NAME, "expert", subset=False, fidelity=FIDELITY)

@@ -59,7 +59,7 @@ def test_partial_runs_are_never_ranked_above_complete_ones_and_are_listed_by_siz
     readme = render_readme(tmp_path, SUITE.name).read_text()
     ranked, partial = readme.split("## Partial runs (not ranked)")
     ranked_rows = [line for line in ranked.splitlines() if line.startswith("| 1 ")]
-    assert len(ranked_rows) == 1 and ranked_rows[0].startswith("| 1 | `steady` | 80.0")
+    assert len(ranked_rows) == 1 and ranked_rows[0].startswith("| 1 | `steady` | no | 80.0")
     assert "| 2 " not in ranked  # nothing else is ranked
     order = [line.split("|")[2].strip() for line in partial.splitlines() if line.startswith("| – ")]
     assert order == ["`crashy`", "`big`", "`tiny`"]  # full suite first, then subsets by size, not by score
