@@ -13,13 +13,13 @@ import json
 import platform
 import time
 
-from hbmp_bench.agents import load_agent
+from hbmp_bench.agents import agent_env_kwargs, load_agent
 from hbmp_bench.envs import BehaviorEnv
 
 
 def measure(town: str, task: str, episodes: int) -> dict:
-    env = BehaviorEnv(town=town, task=task)
     agent = load_agent("expert")
+    env = BehaviorEnv(town=town, task=task, **agent_env_kwargs(agent))
     decisions, seconds = 0, 0.0
     for index in range(episodes):
         obs, info = env.reset(seed=index, options={"episode_index": index})

@@ -22,10 +22,12 @@ from pathlib import Path
 
 import pandas as pd
 
-from hbmp_bench.agents import load_agent
+from hbmp_bench.agents import agent_env_kwargs, load_agent
 from hbmp_bench.envs import traffic_v0
 
 RESULTS = Path(__file__).parent / "results" / "multi_agent.json"
+EXPERT_ENV = agent_env_kwargs(load_agent("expert"))
+"""The env options the expert asks for (``privileged=True``: the ego's privileged scene)."""
 
 
 def run(env, seed: int, max_steps: int, frames: list | None = None) -> tuple[pd.DataFrame, int, float]:
@@ -79,14 +81,14 @@ def main() -> None:
         from hbmp_bench.render import write_gif
 
         env = traffic_v0.parallel_env(town="Town01", task="NavigationDynamic", episode_index=0, controlled="all",
-                                      render_mode="rgb_array")
+                                      render_mode="rgb_array", **EXPERT_ENV)
         frames: list = []
         run(env, seed=0, max_steps=args.gif_steps, frames=frames)
         env.close()
         write_gif(frames[::2], args.gif, fps=5)
         print(f"wrote {args.gif} ({len(frames[::2])} frames)")
 
-    env = traffic_v0.parallel_env(town="Town01", task="NavigationDynamic", episode_index=0, controlled="all")
+    env = traffic_v0.parallel_env(town="Town01", task="NavigationDynamic", episode_index=0, controlled="all", **EXPERT_ENV)
     table, decisions, seconds = run(env, seed=0, max_steps=args.report_steps)
     env.close()
     pd.set_option("display.width", 160)
@@ -96,7 +98,7 @@ def main() -> None:
     scaling = []
     for n in args.counts:
         env = traffic_v0.parallel_env(town=args.town, task="NavigationDynamic", episode_index=0, controlled=n,
-                                      density="dense", ego_fidelity="event")
+                                      density="dense", ego_fidelity="event", **EXPERT_ENV)
         _, decisions, seconds = run(env, seed=0, max_steps=args.steps)
         env.close()
         scaling.append({"controlled": n, "agents": n + 1, "env_steps": args.steps, "agent_decisions": decisions,

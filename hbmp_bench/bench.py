@@ -52,10 +52,12 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from hbmp_bench import __version__
+from hbmp_bench.rollout import EpisodeHooks, run_episode
 
 FIDELITIES = ("event", "continuous")
 HIGHWAY_ENVS = ("highway-fast-v0", "intersection-v0")
@@ -219,52 +221,43 @@ class _Timer:
             self.times.append(time.perf_counter() - t0)
 
 
-class _TimedObserver:
-    """Stands in for a world's :class:`ObservationBuilder`, timing ``occupancy`` (M_t)."""
-
-    def __init__(self, observer):
-        self._observer = observer
-        self.occupancy = _Timer(observer.occupancy)
-
-    def __getattr__(self, name):
-        return getattr(self._observer, name)
-
-
 @contextlib.contextmanager
 def _instrumented(env):
-    """Time the SUMO step, the driver's control period, the planner, M_t and R_t of ``env`` in place.
+    """Time the SUMO step, the ego driver's control period, the planner, M_t, R_t and the detectors
+    of ``env`` in place (instance attributes shadow the methods; module functions are swapped).
 
     Yields a dict name -> :class:`_Timer`; everything is restored on exit."""
-    import hbmp_bench.envs.world as world_module
+    import hbmp_bench.envs.vehicle as vehicle_module
     import hbmp_bench.planning.executor as executor_module
 
     from hbmp_bench.metrics.detectors import InfractionDetector
 
     world = env.world
     timers = {"sumo_step": _Timer(world.sim.step), "snapshot": _Timer(world.sim.snapshot),
-              "driver_before_step": _Timer(world.driver.before_step),
-              "planner": _Timer(executor_module.plan), "road_profile": _Timer(world_module.road_profile),
-              "detectors": _Timer(InfractionDetector.update)}
-    observer = _TimedObserver(world.observer)
-    timers["occupancy"] = observer.occupancy
-    saved = world.observer, executor_module.plan, world_module.road_profile
+              "driver_before_step": _Timer(world.ego_driver.before_step),
+              "planner": _Timer(executor_module.plan), "road_profile": _Timer(vehicle_module.road_profile),
+              "detectors": _Timer(InfractionDetector.update), "occupancy": _Timer(world.observer.occupancy)}
+    saved = executor_module.plan, vehicle_module.road_profile
     world.sim.step, world.sim.snapshot = timers["sumo_step"], timers["snapshot"]
-    world.driver.before_step = timers["driver_before_step"]
-    world.observer, executor_module.plan, world_module.road_profile = observer, timers["planner"], timers["road_profile"]
+    world.ego_driver.before_step = timers["driver_before_step"]
+    world.observer.occupancy = timers["occupancy"]
+    executor_module.plan, vehicle_module.road_profile = timers["planner"], timers["road_profile"]
     detector_timer = timers["detectors"]
     InfractionDetector.update = lambda self, *args: detector_timer(self, *args)  # the detector is per episode
     try:
         yield timers
     finally:
-        del world.sim.step, world.sim.snapshot, world.driver.before_step
+        del world.sim.step, world.sim.snapshot, world.ego_driver.before_step, world.observer.occupancy
         InfractionDetector.update = detector_timer.fn
-        world.observer, executor_module.plan, world_module.road_profile = saved
+        executor_module.plan, vehicle_module.road_profile = saved
 
 
-def _make_env(cfg: BenchConfig, town: str, fidelity: str):
+def _make_env(cfg: BenchConfig, town: str, fidelity: str, **agent_env: Any):
+    """The measured env; ``agent_env``: the options of the agent that drives it (``agent_env_kwargs``)."""
     from hbmp_bench.envs.behavior_env import BehaviorEnv
 
-    return BehaviorEnv(town=town, task=cfg.task, suite=cfg.suite, episode_index=cfg.episode_index, fidelity=fidelity)
+    return BehaviorEnv(town=town, task=cfg.task, suite=cfg.suite, episode_index=cfg.episode_index, fidelity=fidelity,
+                       **agent_env)
 
 
 def warm_up_kernels() -> float:
@@ -296,35 +289,33 @@ def measure_raw_sumo(cfg: BenchConfig, town: str) -> dict:
 
 def measure_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float | None = None) -> dict:
     """The env with the expert for ``seconds`` of stepping: sim steps/s, decisions/s, in-place latencies."""
-    from hbmp_bench.agents import load_agent
+    from hbmp_bench.agents import agent_env_kwargs, load_agent
 
     seconds = cfg.env_seconds if seconds is None else seconds
     warm_up_s = warm_up_kernels()
-    env = _make_env(cfg, town, fidelity)
     agent = load_agent("expert")
+    env = _make_env(cfg, town, fidelity, **agent_env_kwargs(agent))
     step_length = env.config.step_length_s
     decisions = sim_steps = episodes = 0
     stepping = resetting = cpu = 0.0
+
+    def count_steps(obs, reward, terminated, truncated, info) -> None:
+        nonlocal sim_steps
+        sim_steps += int(round(info["duration_s"] / step_length))
+
+    def timed_out(run) -> bool:  # the agent's time is not the env's: only env.step counts
+        return stepping + run.stepping_s >= seconds
+
+    hooks = EpisodeHooks(on_step=count_steps, stop=timed_out)
     try:
-        t0 = time.perf_counter()
-        obs, info = env.reset(seed=0)
-        resetting += time.perf_counter() - t0
-        agent.reset(info)
         with _instrumented(env) as timers:
             while stepping < seconds:
-                action = agent.act(obs, info)  # the agent's time is not the env's
-                t0, c0 = time.perf_counter(), time.process_time()
-                obs, _, terminated, truncated, info = env.step(action)
-                stepping += time.perf_counter() - t0
-                cpu += time.process_time() - c0
-                decisions += 1
-                sim_steps += int(round(info["duration_s"] / step_length))
-                if terminated or truncated:
-                    episodes += 1
-                    t0 = time.perf_counter()
-                    obs, info = env.reset(seed=episodes)
-                    resetting += time.perf_counter() - t0
-                    agent.reset(info)
+                run = run_episode(env, agent, seed=episodes, hooks=hooks)
+                stepping += run.stepping_s
+                cpu += run.stepping_cpu_s
+                resetting += run.reset_s
+                decisions += run.decisions
+                episodes += run.ended
             latency = {name: latency_stats(t.times) for name, t in timers.items()}
             share = {name: round(sum(t.times) / stepping, 4) for name, t in timers.items()}
     finally:
@@ -495,7 +486,8 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
     from tqdm import tqdm
 
     jobs = [("raw", t, None) for t in cfg.towns] + [("env", t, f) for t in cfg.towns for f in FIDELITIES]
-    jobs += [("highway", None, e) for e in (HIGHWAY_ENVS if cfg.highway_seconds > 0 else ())]
+    highway_missing = _missing("highway_env") if cfg.highway_seconds > 0 else ""
+    jobs += [("highway", None, e) for e in (HIGHWAY_ENVS if cfg.highway_seconds > 0 and not highway_missing else ())]
     jobs += [("scaling", None, n) for n in cfg.scaling_workers]
     ray_missing = _missing("ray") if cfg.ray_workers else ""
     jobs += [("ray", None, n) for n in (cfg.ray_workers if not ray_missing else ())]
@@ -525,6 +517,7 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
         "note": "shared, noisy machine; modest durations; see hbmp_bench.bench for the method",
         "towns": towns,
         "highway_env": highway,
+        "highway_env_skipped": highway_missing,
         "scaling": scaling,
         "ray_scaling": on_ray,
         "ray_skipped": ray_missing,
@@ -562,6 +555,8 @@ def format_table(result: dict) -> str:
         who = " Ray actor(s) " if r.get("backend") == "ray" else " worker(s) "
         lines.append(f"{str(r['workers']) + who + r['town'] + ' ' + r['fidelity'] + ' random':44s} "
                      f"{r['sim_steps_per_s']:12.1f} {r['decisions_per_s']:12.1f}   peak {r['peak_rss_mb_per_process']} MB/process")
+    if result.get("highway_env_skipped"):
+        lines.append(f"highway-env skipped: {result['highway_env_skipped']}")
     if result.get("ray_skipped"):
         lines.append(f"Ray scaling skipped: {result['ray_skipped']}")
     if result.get("import"):

@@ -58,6 +58,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from hbmp_bench.agents import load_agent
     from hbmp_bench.evaluation import Job, run_jobs
     from hbmp_bench.metrics import success_table, summarize
+    from hbmp_bench.metrics.summary import SUCCESS_TABLE_TITLE, summary_lines
     from hbmp_bench.scenarios import get_suite
 
     town, task = _parse_env_id(args.env)
@@ -77,9 +78,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
         summary["records"] = [r.to_dict() for r in records]
         print(json.dumps(summary, indent=2))
     else:
+        print(SUCCESS_TABLE_TITLE)
         print(success_table(records).to_string())
-        for key, value in summary.items():
-            print(f"{key:24s} {value}")
+        print()
+        print("\n".join(summary_lines(summary)))
     return 0
 
 
@@ -109,47 +111,74 @@ def _cmd_maps(args: argparse.Namespace) -> int:
     raise AssertionError(args.maps_cmd)
 
 
+class HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Every option's help ends with its default, ``(default: X)``, unless the help already says
+    it, the default is None (the option is simply absent) or the option is a switch."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        shown = action.option_strings or action.nargs in (argparse.OPTIONAL, argparse.ZERO_OR_MORE)
+        if (shown and "default" not in text and action.default not in (None, False, argparse.SUPPRESS)
+                and action.nargs != 0):
+            text += " (default: %(default)s)"
+        return text
+
+
+def parsers(parser: argparse.ArgumentParser) -> list[tuple[str, argparse.ArgumentParser]]:
+    """``(command, parser)`` for ``parser`` and every sub-command's parser, nested ones included."""
+    found = [(parser.prog, parser)]
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in dict.fromkeys(action.choices.values()):  # aliases share a parser
+                found += parsers(sub)
+    return found
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="hbmp-bench", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("list", help="env ids, towns, tasks, suites and agents")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print JSON instead of lists")
     p.set_defaults(func=_cmd_list)
 
     p = sub.add_parser("run", help="run an agent for N episodes of one env id and print a summary")
-    p.add_argument("--env", default="hbmp_bench/Town01-Navigation-v0")
+    p.add_argument("--env", default="hbmp_bench/Town01-Navigation-v0",
+                   help="env id hbmp_bench/<Town>-<Task>-v0 (hbmp-bench list shows them)")
     p.add_argument("--town", default=None, help="built-in or imported map; replaces the env id's town")
     p.add_argument("--agent", default="expert", help="registry name or module:Class")
-    p.add_argument("--episodes", type=int, default=5)
-    p.add_argument("--suite", default="corl2017")
+    p.add_argument("--episodes", type=int, default=5, help="first N episodes of the suite for this town and task")
+    p.add_argument("--suite", default="corl2017", help="episode suite (hbmp-bench list shows them)")
     p.add_argument("--fidelity", default=None, choices=("continuous", "event"),
                    help="default: the env's (continuous, the motion planner)")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print a JSON summary with every episode record")
     p.set_defaults(func=_cmd_run)
 
     p = sub.add_parser("maps", help="map statistics, import and removal")
     msub = p.add_subparsers(dest="maps_cmd", required=True)
     q = msub.add_parser("stats", help="statistics of built-in and imported maps")
-    q.add_argument("names", nargs="*")
-    q.add_argument("--json", action="store_true")
-    q = msub.add_parser("import", help="import an OpenDRIVE .xodr or SUMO .net.xml under a name")
-    q.add_argument("file")
-    q.add_argument("--name", required=True)
+    q.add_argument("names", nargs="*", help="maps to describe (default: every built-in and imported map)")
+    q.add_argument("--json", action="store_true", help="print JSON")
+    q = msub.add_parser("import", help="import an OpenDRIVE .xodr or SUMO .net.xml under a name (into "
+                        "$HBMP_BENCH_DATA/maps, or ~/.local/share/hbmp_bench/maps when it is unset)")
+    q.add_argument("file", help="OpenDRIVE .xodr or SUMO .net.xml file")
+    q.add_argument("--name", required=True, help="name to use it under (--town NAME)")
     q.add_argument("--like", default=None, help="built-in town whose task parameters (CoRL2017 traffic counts, "
                    "route lengths) the map takes; default: from the map's own size")
     q.add_argument("--lights", default="source", choices=("source", "lawful"),
-                   help="traffic light programs: the map's own (default) or the benchmark's lawful timing")
+                   help="traffic light programs: the map's own (source) or the benchmark's lawful timing (lawful)")
     q.add_argument("--guess-lights", action="store_true", help="add lights at junctions without any")
     q.add_argument("--no-sidewalks", action="store_true",
                    help="keep a map without walkable edges so (default: guess sidewalks and crossings)")
     q.add_argument("--force", action="store_true", help="replace an imported map of the same name")
     q = msub.add_parser("remove", help="delete an imported map")
-    q.add_argument("name")
+    q.add_argument("name", help="an imported map's name")
     p.set_defaults(func=_cmd_maps)
 
     for module_name in COMMAND_MODULES:
         importlib.import_module(module_name).add_commands(sub)
+    for _, each in parsers(parser):
+        each.formatter_class = HelpFormatter
     return parser
 
 

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 from typing import Any, Protocol, runtime_checkable
 
-from hbmp_bench.errors import UnknownNameError, UserError, raised_at
+from hbmp_bench.errors import UnknownNameError, UserError
+from hbmp_bench.plugins import described, resolve
 
 
 @runtime_checkable
@@ -25,6 +25,17 @@ class Agent(Protocol):
 
 
 AGENTS: dict[str, Callable[..., Agent]] = {}
+
+PRIVILEGED_OPTION = "privileged"
+"""The env option an agent sets to True in its ``env_kwargs`` to read the privileged fields of
+``info["scene"]`` (``WorldConfig.privileged``); an evaluation that grants it is marked privileged."""
+
+
+def agent_env_kwargs(agent: Any) -> dict[str, Any]:
+    """The env options ``agent`` asks for: its optional ``env_kwargs`` attribute (the observation
+    kind a policy was trained on; ``privileged: True`` for the rule-based expert). Every runner
+    builds the agent's env with them (the isolated evaluation through ``with_agent_env``)."""
+    return dict(getattr(agent, "env_kwargs", None) or {})
 
 
 def register_agent(name: str) -> Callable[[Callable[..., Agent]], Callable[..., Agent]]:
@@ -63,27 +74,14 @@ def load_agent(spec: str, **kwargs: Any) -> Agent:
 
 def _load_plugin(spec: str, **kwargs: Any) -> Agent:
     """Build a ``module:Class`` agent; whatever the user's code raises becomes one ``UserError``."""
-    module_name, _, attr = spec.partition(":")
-    try:
-        module = importlib.import_module(module_name)
-    except ImportError as exc:
-        raise UserError(f"cannot load agent {spec!r}: {exc}") from exc
-    except Exception as exc:  # noqa: BLE001 - the plug-in module's own code failed
-        raise UserError(f"cannot load agent {spec!r}: importing {module_name} raised {_described(exc)}") from exc
-    try:
-        factory = getattr(module, attr)
-    except AttributeError as exc:
-        raise UserError(f"cannot load agent {spec!r}: {exc}") from exc
+    factory = resolve(spec, "agent")
+    attr = spec.partition(":")[2]
     try:
         agent = factory(**kwargs)
     except Exception as exc:  # noqa: BLE001 - the plug-in's constructor failed
-        raise UserError(f"cannot load agent {spec!r}: {attr}() raised {_described(exc)}") from exc
+        raise UserError(f"cannot load agent {spec!r}: {attr}() raised {described(exc)}") from exc
     if not isinstance(agent, Agent):
         raise UserError(f"cannot load agent {spec!r}: {type(agent).__name__} does not implement the Agent protocol "
                         "(name, reset(info), act(observation, info))")
     return agent
 
-
-def _described(exc: BaseException) -> str:
-    where = "" if isinstance(exc, SyntaxError) else raised_at(exc)  # a SyntaxError names its file and line
-    return f"{type(exc).__name__}: {exc}" + (f" (at {where})" if where else "")

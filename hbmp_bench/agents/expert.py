@@ -5,7 +5,7 @@ A lawful, route-aware driver. It reads R_t, M_t and the privileged ``info["scene
 that conflict with its own through the next junction, the pedestrians near its path and at the
 crossings it passes over, how settled the motion planner is on its lane (see
 :func:`hbmp_bench.envs.observation.road_profile` and :mod:`hbmp_bench.envs.privileged`). Without
-the privileged fields (another environment) it falls back to the light ending its lane and the
+the privileged fields (an env made without ``privileged=True``, or another environment) it falls back to the light ending its lane and the
 gap in M_t.
 
 Every speed rule returns :class:`Target` s, "be no faster than ``speed_mps`` once ``at_m`` ahead"
@@ -48,13 +48,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hbmp_bench.agents.base import register_agent
-from hbmp_bench.envs.observation import ObservationConfig
-from hbmp_bench.planning.behaviors import BehaviorConfig, reference_speed
+from hbmp_bench.agents.base import PRIVILEGED_OPTION, register_agent
+from hbmp_bench.envs.observation import LANE_WIDTH_M, ObservationConfig
+from hbmp_bench.planning.behaviors import Behavior, BehaviorConfig, reference_speed
 from hbmp_bench.planning.executor import ExecutorConfig
 
-SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = range(5)
-LANE_WIDTH_M = 3.5
+SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = (int(b) for b in Behavior)
 EGO_LENGTH_M = 4.5
 """The ego's footprint length [m] (the ``hbmp_ego`` type)."""
 RED, YELLOW, GREEN = "rRu", "yY", "gGoOs"
@@ -146,6 +145,10 @@ class ExpertAgent:
         grid: the M_t grid it reads (must match the environment's).
         behavior: the v_ref rule of speed_up / speed_down (must match the environment's).
         executor: the motion planner's behavior timing (must match the environment's).
+
+    Attributes:
+        env_kwargs: the env options it asks for: ``privileged=True`` (the privileged scene fields;
+            an evaluation marks its results privileged).
     """
 
     name = "expert"
@@ -164,6 +167,7 @@ class ExpertAgent:
         self.grid = grid or ObservationConfig()
         self.behavior = behavior or BehaviorConfig()
         self.executor = executor or ExecutorConfig()
+        self.env_kwargs = {PRIVILEGED_OPTION: True}
         self._stuck_s = 0.0
 
     def reset(self, info):

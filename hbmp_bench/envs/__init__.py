@@ -1,4 +1,4 @@
-"""Environments: the gymnasium behavior env over a shared driving world.
+"""Environments: the PettingZoo traffic env (the core), the gymnasium behavior and control envs over it.
 
 The registration helpers (``env_ids``, ``make``, ``register_envs``, ``TRAINING_ID``) load with the
 package; the env classes and their constants load on first access (they import SUMO and the
@@ -8,11 +8,14 @@ planner), so that ``import hbmp_bench`` registers the ids without them.
 from hbmp_bench._lazy import lazy_exports
 from hbmp_bench.envs.registration import TRAINING_ID, env_ids, make, register_envs
 
-__all__ = ["BEHAVIORS", "ROAD_FEATURES", "TRAINING_ID", "BehaviorEnv", "DrivingWorld", "ObservationConfig",
-           "WorldConfig", "env_ids", "make", "register_envs"]
+__all__ = ["BEHAVIORS", "ROAD_FEATURES", "TRAINING_ID", "BehaviorEnv", "ControlledVehicle", "DrivingWorld",
+           "ObservationConfig", "ScenarioConfig", "WorldConfig", "env_ids", "make", "register_envs"]
 
 __getattr__, __dir__ = lazy_exports(__name__, {
     ".behavior_env": ("BehaviorEnv",),
+    ".config": ("ScenarioConfig", "WorldConfig"),
     ".observation": ("ROAD_FEATURES", "ObservationConfig"),
-    ".world": ("BEHAVIORS", "DrivingWorld", "WorldConfig"),
+    ".vehicle": ("ControlledVehicle",),
+    ".world": ("DrivingWorld",),
+    "hbmp_bench.planning.behaviors": ("BEHAVIORS",),
 })

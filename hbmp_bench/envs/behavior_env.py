@@ -6,11 +6,12 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 
-from hbmp_bench.envs.observation import ObservationConfig, observation_space
-from hbmp_bench.envs.world import BEHAVIORS, DrivingWorld, WorldConfig
-from hbmp_bench.scenarios import TASKS, check_task, check_town, get_suite, sample_episode, suite_episodes, traffic_for
+from hbmp_bench.envs.config import WorldConfig
+from hbmp_bench.envs.observation import ObservationConfig
+from hbmp_bench.envs.traffic_v0 import TrafficParallelEnv
+from hbmp_bench.envs.world import EGO_ID
+from hbmp_bench.planning.behaviors import BEHAVIORS
 
 
 class BehaviorEnv(gym.Env):
@@ -57,6 +58,12 @@ class BehaviorEnv(gym.Env):
     observation: ``deformed`` or ``vehicle_centric`` M_t; grid options via ``observation_config``.
     density: override background traffic (``empty``, ``corl``, ``regular``, ``dense``); another
         value raises ValueError here.
+    privileged: add the privileged fields to ``info["scene"]`` (the rule-based expert's; see
+        :class:`WorldConfig`); default off.
+
+    ## Implementation
+    The parallel env (:class:`~hbmp_bench.envs.traffic_v0.TrafficParallelEnv`) with no background
+    agent, seen from the ego: one implementation for both.
 
     ## Version history
     v0: first release.
@@ -78,110 +85,77 @@ class BehaviorEnv(gym.Env):
         observation_config: ObservationConfig | None = None,
         density: str | None = None,
         render_mode: str | None = None,
+        privileged: bool = False,
     ):
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None, 'rgb_array'")
-        self.town = check_town(town)
-        self.task = check_task(task)
-        self.suite = get_suite(suite)
-        self.random_goals = random_goals
-        self.density = density
-        self.traffic = None if density is None else traffic_for(self.town, self.task, density)
-        """The background traffic ``density`` sets for every episode (None: each episode's own);
-        an unknown density fails here, before any simulation starts."""
-        obs_cfg = observation_config or ObservationConfig(kind=observation)
-        fidelity = WorldConfig.fidelity if fidelity is None else fidelity
-        self.config = WorldConfig(fidelity=fidelity, reward=reward, decision_period_s=decision_period_s,
-                                  observation=obs_cfg)
-        self.episodes = () if random_goals else suite_episodes(self.suite.name, town, task)
-        if episode_index is not None and not 0 <= episode_index < len(self.episodes):
-            raise ValueError(f"episode_index must be in [0, {len(self.episodes)}), got {episode_index}")
-        self.episode_index = episode_index
-        self.action_space = spaces.Discrete(len(BEHAVIORS))
-        self.observation_space = observation_space(obs_cfg)
+        self.parallel = TrafficParallelEnv(
+            town=town, task=task, suite=suite, episode_index=episode_index, random_goals=random_goals,
+            density=density, controlled="none", ego_fidelity=WorldConfig.fidelity if fidelity is None else fidelity,
+            reward=reward, decision_period_s=decision_period_s, observation=observation,
+            observation_config=observation_config, render_mode=render_mode, privileged=privileged)
+        self.action_space = self.parallel.action_space(EGO_ID)
+        self.observation_space = self.parallel.observation_space(EGO_ID)
         self.render_mode = render_mode
-        self._renderer = None
-        self._frames: list[np.ndarray] = []
-        self._last_behavior = ""
-        self._world: DrivingWorld | None = None
-        self._running = False
 
     @property
-    def world(self) -> DrivingWorld:
-        if self._world is None:
-            self._world = DrivingWorld(self.town, self.config)
-            if self.render_mode == "rgb_array":
-                self._world.on_substep = self._capture
-        return self._world
+    def scenario(self):
+        """The scenario (:class:`~hbmp_bench.envs.config.ScenarioConfig`)."""
+        return self.parallel.scenario
 
-    # ------------------------------------------------------------- pictures
-    def _frame(self) -> np.ndarray:
-        if self._renderer is None:
-            from hbmp_bench.render import TopDownRenderer
+    @property
+    def config(self) -> WorldConfig:
+        return self.parallel.config
 
-            self._renderer = TopDownRenderer(self.world.net)
-        w = self.world
-        caption = f"{w.town} {self.task}  t={w.sim.time:5.1f} s  {w._ego.speed:4.1f} m/s  {self._last_behavior}"
-        return self._renderer.frame(w.scene_view(caption))
+    @property
+    def town(self) -> str:
+        return self.scenario.town
 
-    def _capture(self) -> None:
-        self._frames.append(self._frame())
+    @property
+    def task(self) -> str:
+        return self.scenario.task
 
-    def render(self) -> np.ndarray | None:
-        """``rgb_array``: the top-down view now, (H, W, 3) uint8 (see :mod:`hbmp_bench.render`)."""
-        if self.render_mode is None:
-            return None
-        if not self._running and self._world is None:
-            raise RuntimeError("call reset() before render()")
-        return self._frames[-1] if self._frames else self._frame()
+    @property
+    def episodes(self):
+        return self.scenario.episodes
 
-    def drain_frames(self) -> list[np.ndarray]:
-        """All frames rendered at every 0.1 s simulation step since the last call (the frames
-        between decisions), oldest first; empty unless ``render_mode="rgb_array"``."""
-        frames, self._frames = self._frames, []
-        return frames
+    @property
+    def traffic(self):
+        """The background traffic ``density`` sets for every episode (None: each episode's own)."""
+        return self.scenario.traffic
 
-    def _pick_episode(self, options: dict | None):
-        opts = options or {}
-        if self.random_goals:
-            traffic = self.traffic if self.traffic is not None else traffic_for(self.town, self.task, None)
-            seed = int(self.np_random.integers(2**31))
-            return sample_episode(self.town, "Navigation" if self.task == "NavigationDynamic" else self.task,
-                                  np.random.default_rng(seed), suite=self.suite, index=0, seed=seed, traffic=traffic)
-        index = opts.get("episode_index", self.episode_index)
-        if index is None:
-            index = int(self.np_random.integers(len(self.episodes)))
-        episode = self.episodes[index]
-        if self.traffic is not None:
-            import dataclasses
+    @property
+    def world(self):
+        """The driving world (:class:`~hbmp_bench.envs.world.DrivingWorld`)."""
+        return self.parallel.world
 
-            episode = dataclasses.replace(episode, traffic=self.traffic)
-        return episode
+    def record(self, agent: str = ""):
+        """The episode record so far (None before the first reset)."""
+        return self.parallel.record(agent)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        episode = self._pick_episode(options)
-        obs, info = self.world.start(episode, seed=int(self.np_random.integers(2**31)))
-        self._running = True
-        self._frames, self._last_behavior = [], ""
-        if self.render_mode == "rgb_array":
-            self._capture()
-        return obs, info
+        obs, infos = self.parallel.reset(seed=seed, options=options)
+        return obs[EGO_ID], infos[EGO_ID]
 
     def step(self, action):
-        if not self._running:
+        if EGO_ID not in self.parallel.agents:
             raise RuntimeError("call reset() before step() (and again after an episode ends)")
         if isinstance(action, (bool, np.bool_)) or not (
                 self.action_space.contains(action) or isinstance(action, (int, np.integer)) and 0 <= int(action) < 5):
             raise ValueError(f"action must be an int in [0, {len(BEHAVIORS)}) ({', '.join(BEHAVIORS)}), "
                              f"got {type(action).__name__} {action!r}")
-        self._last_behavior = BEHAVIORS[int(action)]
-        obs, reward, terminated, truncated, info = self.world.step(int(action))
-        if terminated or truncated:
-            self._running = False
-        return obs, reward, terminated, truncated, info
+        obs, rewards, terms, truncs, infos = self.parallel.step({EGO_ID: int(action)})
+        return obs[EGO_ID], rewards[EGO_ID], terms[EGO_ID], truncs[EGO_ID], infos[EGO_ID]
+
+    def render(self) -> np.ndarray | None:
+        """``rgb_array``: the top-down view now, (H, W, 3) uint8 (see :mod:`hbmp_bench.render`)."""
+        return self.parallel.render()
+
+    def drain_frames(self) -> list[np.ndarray]:
+        """All frames rendered at every 0.1 s simulation step since the last call (the frames
+        between decisions), oldest first; empty unless ``render_mode="rgb_array"``."""
+        return self.parallel.drain_frames()
 
     def close(self):
-        if self._world is not None:
-            self._world.close()
-        self._running = False
+        self.parallel.close()

@@ -2,7 +2,8 @@
 
 The paper's baseline "directly maps input to u without hierarchical modeling": the agent sets the
 ego's acceleration and steering every 0.1 s. Same scenarios, traffic, detectors and pictures as
-:class:`~hbmp_bench.envs.BehaviorEnv` (it is one, with another driver).
+:class:`~hbmp_bench.envs.BehaviorEnv`: the same parallel env with the ego's driver configured as
+:class:`~hbmp_bench.envs.drivers.ControlDriver` (``ego_driver="control"``).
 
 ## Action space
 ``Box(-1, 1, (2,), float32)``: ``[a, s]``: ``a > 0`` throttle (fraction of the bicycle model's
@@ -23,120 +24,91 @@ the lane width and its heading error divided by π/2, both clipped to [-2, 2].
 
 from __future__ import annotations
 
-import dataclasses
+from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from hbmp_bench.envs.behavior_env import BehaviorEnv
-from hbmp_bench.envs.drivers import KEEP, ContinuousConfig, ModelDriver
-from hbmp_bench.envs.observation import ROAD_FEATURES
-from hbmp_bench.maps.roadnet import RoadNetwork
-from hbmp_bench.planning import Control, instant_costs
-from hbmp_bench.sim.sumo import Actors, SumoSim, VehicleState, VehicleType
-
-LANE_WIDTH_M = 3.5
+from hbmp_bench.envs.observation import LANE_WIDTH_M, ROAD_FEATURES
+from hbmp_bench.envs.traffic_v0 import TrafficParallelEnv
+from hbmp_bench.envs.world import EGO_ID
+from hbmp_bench.planning.behaviors import Behavior
 
 
-class ControlDriver(ModelDriver):
-    """One 0.1 s control step per decision on the bicycle model; SUMO mirrors the pose.
-
-    Same protocol as :mod:`hbmp_bench.envs.drivers`; :meth:`set_control` gives the action before
-    the world begins the "behavior" (which the world labels keep).
-    """
-
-    def __init__(self, sim: SumoSim, net: RoadNetwork, vehicle_id: str, vtype: VehicleType,
-                 config: ContinuousConfig):
-        super().__init__(sim, net, vehicle_id, config)
-        self.planner = dataclasses.replace(config.planner, length=vtype.length, width=vtype.width)
-        self.dt = config.executor.dt
-        self.path = None
-        self._control = Control(0.0, 0.0, 0.0)
-        self._left = 0
-        self._costs = (0.0, 0.0)
-
-    def set_control(self, action: np.ndarray) -> None:
-        accel, steer = (float(np.clip(a, -1.0, 1.0)) for a in action)
-        self._control = Control(steer=steer, throttle=max(accel, 0.0), brake=max(-accel, 0.0))
-
-    def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...]) -> int:
-        self.path = self.lane_path(lane, next_edges)
-        self._left = 1
-        return KEEP
-
-    def before_step(self, others: Actors) -> bool:
-        if self._left <= 0:
-            return False
-        self._left -= 1
-        self.advance(self._control)
-        obstacles = self.nearby(others)
-        self._costs = instant_costs(self.path, self.model, obstacles, self.planner)
-        return True
-
-    def behavior_reward(self) -> float:
-        """r_t = −dt·(c_dist + c_obs) after the step."""
-        return -self.dt * (self.planner.w_dist * self._costs[0] + self.planner.w_obs * self._costs[1])
-
-    def behavior_costs(self) -> dict[str, float]:
-        return {"c_dist": self._costs[0], "c_obs": self._costs[1]}
-
-    def errors(self) -> tuple[float, float]:
-        """Lateral [m] and heading [rad] error of the ego to the followed lane."""
-        if self.path is None:
-            return 0.0, 0.0
-        _, e, th, _ = self.path.project(self.model.xy, self.model.yaw)
-        return float(e), float(th)
-
-
-class ControlEnv(BehaviorEnv):
+class ControlEnv(gym.Env):
     """Acceleration and steering at 10 Hz on the behavior env's scenarios (see the module docstring).
 
-    Arguments as :class:`BehaviorEnv`; ``fidelity`` must be None or ``continuous`` (the ego always
-    runs the bicycle model).
+    Arguments as :class:`~hbmp_bench.envs.BehaviorEnv`; ``fidelity`` must be None or ``continuous``
+    (the ego always runs the bicycle model).
     """
 
-    def __init__(self, *args, fidelity: str | None = None, **kwargs):
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(self, town: str = "Town01", task: str = "Navigation", suite: str = "corl2017",
+                 episode_index: int | None = None, random_goals: bool = False, fidelity: str | None = None,
+                 reward: str = "dense", observation: str = "deformed", observation_config=None,
+                 density: str | None = None, render_mode: str | None = None, privileged: bool = False):
         if fidelity not in (None, "continuous"):
             raise ValueError(f"the control env always runs the bicycle model; fidelity must be 'continuous', got {fidelity!r}")
-        super().__init__(*args, fidelity="continuous", **kwargs)
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None, 'rgb_array'")
+        self.parallel = TrafficParallelEnv(
+            town=town, task=task, suite=suite, episode_index=episode_index, random_goals=random_goals,
+            density=density, controlled="none", ego_fidelity="continuous", ego_driver="control", reward=reward,
+            observation=observation, observation_config=observation_config, render_mode=render_mode,
+            privileged=privileged)
+        self.render_mode = render_mode
         self.action_space = spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
         self.observation_space = spaces.Dict(
-            occupancy=self.observation_space["occupancy"],
+            occupancy=self.parallel.observation_space(EGO_ID)["occupancy"],
             road=spaces.Box(-2.0, 2.0, (len(ROAD_FEATURES) + 2,), dtype=np.float32),
         )
 
     @property
     def world(self):
-        world = super().world
-        if not isinstance(world.driver, ControlDriver):
-            from hbmp_bench.sim.sumo import EGO_TYPE
+        """The driving world (:class:`~hbmp_bench.envs.world.DrivingWorld`)."""
+        return self.parallel.world
 
-            world.driver = ControlDriver(world.sim, world.net, "ego", EGO_TYPE, self.config.continuous)
-        return world
+    @property
+    def episodes(self):
+        return self.parallel.episodes
+
+    def record(self, agent: str = ""):
+        """The episode record so far (None before the first reset)."""
+        return self.parallel.record(agent)
 
     def _extend(self, obs: dict) -> dict:
-        e, th = self.world.driver.errors()
+        e, th = self.world.ego_driver.errors()
         extra = np.clip([e / LANE_WIDTH_M, th / (np.pi / 2)], -2.0, 2.0).astype(np.float32)
         return {"occupancy": obs["occupancy"], "road": np.concatenate([obs["road"].astype(np.float32), extra])}
 
-    def reset(self, *, seed=None, options=None):
-        obs, info = super().reset(seed=seed, options=options)
-        w = self.world
-        w.driver.path = w.driver.lane_path(w.followed_lane, w._next_edges())
-        return self._extend(obs), info
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        obs, infos = self.parallel.reset(seed=seed, options=options)
+        driver, ego = self.world.ego_driver, self.world.ego
+        driver.path = driver.lane_path(ego.followed_lane, ego.next_edges())
+        return self._extend(obs[EGO_ID]), infos[EGO_ID]
 
     def step(self, action):
-        if not self._running:
+        if EGO_ID not in self.parallel.agents:
             raise RuntimeError("call reset() before step() (and again after an episode ends)")
         action = np.asarray(action, dtype=np.float32).reshape(-1)
         if action.shape != (2,) or not np.all(np.isfinite(action)):
             raise ValueError(f"action must be 2 finite numbers [accel, steer] in [-1, 1], got {action!r}")
-        self.world.driver.set_control(action)
-        obs, reward, terminated, truncated, info = self.world.step(KEEP)
-        for key in ("behavior", "behavior_executed"):
+        self.world.ego_driver.set_control(action)
+        obs, rewards, terms, truncs, infos = self.parallel.step({EGO_ID: int(Behavior.KEEP)})
+        info = infos[EGO_ID]
+        for key in ("behavior", "behavior_executed", "action_mask"):
             info.pop(key, None)
         info["control"] = action.tolist()
-        info.pop("action_mask", None)
-        if terminated or truncated:
-            self._running = False
-        return self._extend(obs), reward, terminated, truncated, info
+        return self._extend(obs[EGO_ID]), rewards[EGO_ID], terms[EGO_ID], truncs[EGO_ID], info
+
+    def render(self):
+        return self.parallel.render()
+
+    def drain_frames(self) -> list[np.ndarray]:
+        return self.parallel.drain_frames()
+
+    def close(self):
+        self.parallel.close()

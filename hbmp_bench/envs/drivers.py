@@ -14,6 +14,10 @@ A driver executes one behavior at a time for one vehicle; the world steps SUMO a
   (:mod:`hbmp_bench.planning`): replanning and tracking at 10 Hz on a kinematic bicycle model whose
   pose is pushed into SUMO every step (``moveToXY``), so background traffic and pedestrians react to
   it. The behavior lasts until the executor's finish condition holds (variable duration).
+- :class:`ControlDriver` -- no behavior layer (the flat baseline): the agent's acceleration and
+  steering drive the bicycle model for one 0.1 s step per decision.
+
+:data:`DRIVERS` names them; :func:`make_driver` builds one.
 """
 
 from __future__ import annotations
@@ -26,16 +30,12 @@ import numpy as np
 
 from hbmp_bench.envs.observation import followed_path
 from hbmp_bench.maps.roadnet import LANE_CHANGE_CUTOFF_M, RoadNetwork
-from hbmp_bench.planning import (BehaviorConfig, BehaviorExecutor, Control, ExecutorConfig, Obstacles, PlannerConfig,
-                                 PlanResult, ReferencePaths, VehicleParams, reference_speed)
+from hbmp_bench.planning import (Behavior, BehaviorConfig, BehaviorExecutor, Control, ExecutorConfig, Obstacles,
+                                 PlannerConfig, PlanResult, ReferencePaths, VehicleParams, instant_costs,
+                                 reference_speed)
 from hbmp_bench.planning import VehicleState as ModelState
 from hbmp_bench.planning import step as bicycle_step
 from hbmp_bench.sim.sumo import Actors, SumoSim, VehicleState, VehicleType
-
-SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = range(5)
-FIDELITIES = ("event", "continuous")
-
-
 
 
 def feasible_behaviors(net: RoadNetwork, lane_id: str, lane_pos: float | None = None) -> np.ndarray:
@@ -43,10 +43,10 @@ def feasible_behaviors(net: RoadNetwork, lane_id: str, lane_pos: float | None = 
     and, when the front-bumper position ``lane_pos`` [m] is given, more than
     :data:`LANE_CHANGE_CUTOFF_M` of the lane ahead."""
     mask = np.ones(5, dtype=np.int8)
-    mask[CHANGE_LEFT] = net.neighbour_lane(lane_id, +1) is not None
-    mask[CHANGE_RIGHT] = net.neighbour_lane(lane_id, -1) is not None
+    mask[Behavior.CHANGE_LEFT] = net.neighbour_lane(lane_id, +1) is not None
+    mask[Behavior.CHANGE_RIGHT] = net.neighbour_lane(lane_id, -1) is not None
     if lane_pos is not None and lane_id in net.lanes and net.lane(lane_id).length - lane_pos < LANE_CHANGE_CUTOFF_M:
-        mask[CHANGE_LEFT] = mask[CHANGE_RIGHT] = 0
+        mask[Behavior.CHANGE_LEFT] = mask[Behavior.CHANGE_RIGHT] = 0
     return mask
 
 
@@ -100,11 +100,11 @@ class EventDriver:
 
     def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...]) -> int:
         """Start ``behavior``; ``lane`` is the lane followed (SUMO's own lane in event fidelity)."""
-        executed = behavior if feasible_behaviors(self.net, state.lane, state.lane_pos)[behavior] else KEEP
+        executed = behavior if feasible_behaviors(self.net, state.lane, state.lane_pos)[behavior] else Behavior.KEEP
         limit = self.net.lane(state.lane).speed
         self.sim.set_speed(self.vehicle_id, reference_speed(executed, state.speed, limit, self.behavior_config))
-        if executed in (CHANGE_LEFT, CHANGE_RIGHT):
-            side = +1 if executed == CHANGE_LEFT else -1
+        if executed in (Behavior.CHANGE_LEFT, Behavior.CHANGE_RIGHT):
+            side = +1 if executed == Behavior.CHANGE_LEFT else -1
             self.sim.change_lane(self.vehicle_id, self.net.lane(self.net.neighbour_lane(state.lane, side)).index)
         self._left = self.steps
         return executed
@@ -197,7 +197,7 @@ class ContinuousDriver(ModelDriver):
         """Start ``behavior`` on the centreline of ``lane`` continued along ``next_edges`` (in a
         junction: the lane before it, so the path runs through the route's own connection)."""
         if not feasible_behaviors(self.net, state.lane, state.lane_pos)[behavior]:
-            behavior = KEEP
+            behavior = Behavior.KEEP
         refs = self.reference_paths(lane, tuple(next_edges))
         limit = self.net.lane(lane).speed
         return int(self.executor.start(behavior, self.model, refs, limit))
@@ -228,3 +228,73 @@ def obstacles_from(xy: np.ndarray, yaw: np.ndarray, speed: np.ndarray, length: n
     """Planner obstacles (constant-velocity prediction) from (K,) actor arrays."""
     return Obstacles(xy[:, 0], xy[:, 1], yaw, speed, length, width)
 
+
+
+class ControlDriver(ModelDriver):
+    """No behavior layer: one 0.1 s control step per decision on the bicycle model; SUMO mirrors
+    the pose. :meth:`set_control` gives the agent's action before the world begins the "behavior"
+    (which it runs as keep).
+
+    Args:
+        sim / net / vehicle_id / vtype / config: as :class:`ContinuousDriver`.
+    """
+
+    def __init__(self, sim: SumoSim, net: RoadNetwork, vehicle_id: str, vtype: VehicleType,
+                 config: ContinuousConfig):
+        super().__init__(sim, net, vehicle_id, config)
+        self.planner = dataclasses.replace(config.planner, length=vtype.length, width=vtype.width)
+        self.dt = config.executor.dt
+        self.path = None
+        self._control = Control(0.0, 0.0, 0.0)
+        self._left = 0
+        self._costs = (0.0, 0.0)
+
+    def set_control(self, action: np.ndarray) -> None:
+        """``[a, s]`` in [-1, 1]: throttle (a > 0) or brake (a < 0) fraction, steering fraction (left > 0)."""
+        accel, steer = (float(np.clip(a, -1.0, 1.0)) for a in action)
+        self._control = Control(steer=steer, throttle=max(accel, 0.0), brake=max(-accel, 0.0))
+
+    def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...]) -> int:
+        self.path = self.lane_path(lane, next_edges)
+        self._left = 1
+        return Behavior.KEEP
+
+    def before_step(self, others: Actors) -> bool:
+        if self._left <= 0:
+            return False
+        self._left -= 1
+        self.advance(self._control)
+        self._costs = instant_costs(self.path, self.model, self.nearby(others), self.planner)
+        return True
+
+    def behavior_reward(self) -> float:
+        """r_t = −dt·(c_dist + c_obs) after the step."""
+        return -self.dt * (self.planner.w_dist * self._costs[0] + self.planner.w_obs * self._costs[1])
+
+    def behavior_costs(self) -> dict[str, float]:
+        return {"c_dist": self._costs[0], "c_obs": self._costs[1]}
+
+    def errors(self) -> tuple[float, float]:
+        """Lateral [m] and heading [rad] error of the vehicle to the followed lane."""
+        if self.path is None:
+            return 0.0, 0.0
+        _, e, th, _ = self.path.project(self.model.xy, self.model.yaw)
+        return float(e), float(th)
+
+
+FIDELITIES = ("event", "continuous")
+"""The drivers of the behavior layer."""
+DRIVERS = (*FIDELITIES, "control")
+"""Every driver a vehicle can have: a fidelity's, or the flat baseline's (``control``)."""
+
+
+def make_driver(kind: str, sim: SumoSim, net: RoadNetwork, vehicle_id: str, vtype: VehicleType,
+                continuous: ContinuousConfig, behavior: BehaviorConfig, steps_per_decision: int):
+    """The driver ``kind`` (one of :data:`DRIVERS`) for one vehicle."""
+    if kind == "continuous":
+        return ContinuousDriver(sim, net, vehicle_id, vtype, continuous, behavior)
+    if kind == "control":
+        return ControlDriver(sim, net, vehicle_id, vtype, continuous)
+    if kind == "event":
+        return EventDriver(sim, net, vehicle_id, steps_per_decision, behavior)
+    raise ValueError(f"unknown driver {kind!r}; valid: {', '.join(DRIVERS)}")

@@ -24,6 +24,8 @@ from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
+from enum import IntEnum
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -31,7 +33,16 @@ from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.planning.frame import Path
 from hbmp_bench.planning.frame import round_corners as smooth_polyline
 
+if TYPE_CHECKING:
+    from hbmp_bench.sim.sumo import LightAhead
+
 ROAD_FEATURES = ("e_l", "e_r", "a_l", "a_c", "a_r", "l_g", "l_y", "l_r", "d_s", "dv")
+"""R_t's entries in order; :class:`Road` names their indices."""
+Road = IntEnum("Road", [(name.upper(), k) for k, name in enumerate(ROAD_FEATURES)])
+"""Index of each R_t entry by name: ``road[Road.A_C]`` is a_c (no reading R_t by position)."""
+LANE_WIDTH_M = 3.5
+"""Lane width of the towns' networks [m] (``netconvert --default.lanewidth``), the scale of
+lateral errors and of a lane offset in M_t's cells."""
 GREEN, YELLOW, RED = "gGoOs", "yY", "rRu"
 
 
@@ -174,7 +185,7 @@ def occupancy_grid(cfg: ObservationConfig, ego_xy: np.ndarray, ego_yaw: float, p
 
 
 def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[str, ...], route_index: int,
-                 goal_lane: str, speed: float, light: tuple[str, int, float, str] | None,
+                 goal_lane: str, speed: float, light: LightAhead | None,
                  goal_pos: float | None = None) -> tuple[np.ndarray, dict]:
     """R_t (10,) float32 and the quantities it was made of (metres, m/s) for privileged users.
 
@@ -185,7 +196,8 @@ def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[s
         goal_lane / goal_pos: the lane the goal lies on and its position on it [m] (None: no fixed
             goal point, e.g. circulating traffic).
         speed: ego speed [m/s].
-        light: next traffic light on the route as (tls, link index, distance [m], state) or None.
+        light: the next traffic light on the route (its ``distance`` [m] to the stop line and
+            ``state`` char are read) or None.
     """
     r = np.zeros(len(ROAD_FEATURES), dtype=np.float32)
     lane = net.lane(lane_id)
@@ -220,15 +232,15 @@ def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[s
         r[8] = np.clip(remaining / max(lane.length, 1e-6), 0.0, 1.0)
         scene["stop_distance_m"] = remaining
         scene["lane_pos_m"] = float(lane_pos)
-        if light is not None and light[2] <= remaining + 1.0:
-            state = light[3]
+        if light is not None and light.distance <= remaining + 1.0:
+            state = light.state
             r[5], r[6], r[7] = state in GREEN, state in YELLOW, state in RED
             scene["light"] = state
-            scene["stop_distance_m"] = float(light[2])
+            scene["stop_distance_m"] = float(light.distance)
     else:
         r[3] = 1.0
         if light is not None:  # privileged only: the next light beyond the junction (R_t: none)
-            scene["light"] = light[3]
-            scene["stop_distance_m"] = float(light[2])
+            scene["light"] = light.state
+            scene["stop_distance_m"] = float(light.distance)
     r[9] = np.clip(speed / max(lane.speed, 1e-6), 0.0, 2.0)
     return r, scene

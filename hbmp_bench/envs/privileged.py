@@ -43,7 +43,7 @@ from hbmp_bench.envs.observation import followed_path
 from hbmp_bench.maps.roadnet import Connection, RoadNetwork, point_along, project_on_polyline
 from hbmp_bench.metrics.geometry import stop_line_of
 from hbmp_bench.planning.frame import Path
-from hbmp_bench.sim.sumo import Actors, SumoSim, VehicleState, VehicleType
+from hbmp_bench.sim.sumo import Actors, LightAhead, SumoSim, VehicleState, VehicleType
 
 LEADER_RANGE_M = 100.0
 """Farthest leader reported, from the ego's front bumper [m]."""
@@ -170,15 +170,16 @@ class PrivilegedScene:
             lambda lane, nxt: followed_path(net, lane, nxt, 10.0, LEADER_RANGE_M + 20.0))
 
     def fields(self, ego: VehicleState, followed_lane: str, next_edges: tuple[str, ...], actors: Actors,
-               lights: list[tuple[str, int, float, str]], junction_exit_m: float) -> dict:
+               lights: list[LightAhead], junction_exit_m: float) -> dict:
         """The fields for the vehicle ``ego`` following ``followed_lane`` onto ``next_edges``, among
-        ``actors``; the world measures along its route the ``lights`` ahead (tls, link index,
-        distance [m], signal) and ``junction_exit_m``."""
+        ``actors``; the world measures along its route the ``lights`` ahead (nearest first) and
+        ``junction_exit_m``."""
         lane = followed_lane or ego.lane
         out = path_actors(self._path(lane, tuple(next_edges[:3])), ego.xy, self.vtype.length, self.vtype.width,
                           actors.xy, actors.yaw, actors.speed, actors.length, actors.width, actors.is_pedestrian)
-        out["lights_ahead"] = tuple((float(d), state, self.sim.signal_schedule(tls, index))
-                                    for tls, index, d, state in lights if d <= LIGHTS_RANGE_M)
+        out["lights_ahead"] = tuple((float(light.distance), light.state,
+                                     self.sim.signal_schedule(light.tls, light.link_index))
+                                    for light in lights if light.distance <= LIGHTS_RANGE_M)
         out["junction_exit_m"] = junction_exit_m
         link, entry = self._link_ahead(ego, followed_lane, next_edges)
         out["junction_foes"] = () if link is None else self._junction_foes(link, entry)

@@ -23,7 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hbmp_bench.envs.world import EGO_ID, KEEP, SPEED_DOWN, SPEED_UP, DrivingWorld, WorldConfig
+from hbmp_bench.envs.config import WorldConfig
+from hbmp_bench.envs.world import EGO_ID, DrivingWorld
+from hbmp_bench.planning.behaviors import Behavior
 from hbmp_bench.scenarios import Episode, suite_episodes
 
 __all__ = ["LAWFUL_DECEL", "REACTION_S", "STANDSTILL_MPS", "StopTrace", "lawful_stopping_distance",
@@ -142,34 +144,33 @@ def measure_stop(config: WorldConfig, town: str = "Town01", episode: Episode | N
     samples: list[tuple[float, float, float, float]] = []
 
     def sample() -> None:
-        state = world.driver.observe(world.sim.vehicle_state(EGO_ID))
+        state = world.ego_driver.observe(world.sim.vehicle_state(EGO_ID))
         samples.append((world.sim.time, float(state.xy[0]), float(state.xy[1]), float(state.speed)))
 
     def decide(behavior: int) -> dict:
-        _, _, terminated, truncated, info = world.step(behavior)
-        if terminated or truncated:
-            raise RuntimeError(f"{episode.key} ended ({world.done_reason}) before the ego stood still")
-        return info
+        _, _, terminated, truncated, infos = world.step({EGO_ID: behavior}, on_substep=sample)
+        if terminated[EGO_ID] or truncated[EGO_ID]:
+            raise RuntimeError(f"{episode.key} ended ({world.ego.end_reason}) before the ego stood still")
+        return infos[EGO_ID]
 
     try:
-        _, info = world.start(episode, seed)
-        world.on_substep = sample
+        world.start(episode, seed)
         sample()
         for _ in range(max_decisions):
-            info = decide(SPEED_UP)
+            info = decide(Behavior.SPEED_UP)
             limit = info["scene"]["speed_limit_mps"]
             if abs(info["scene"]["speed_mps"] - limit) < AT_LIMIT_MPS:
                 break
         else:
             raise RuntimeError(f"the ego did not reach the speed limit in {max_decisions} decisions")
         cruise_start = len(samples) - 1
-        decide(KEEP)  # the cruise decision
+        decide(Behavior.KEEP)  # the cruise decision
         brake_start = len(samples) - 1
         durations = []
         while samples[-1][3] >= STANDSTILL_MPS:
             if len(durations) >= max_decisions:
                 raise RuntimeError(f"the ego did not stop in {max_decisions} speed_down decisions")
-            info = decide(SPEED_DOWN)
+            info = decide(Behavior.SPEED_DOWN)
             if info["behavior_executed"] != "speed_down":
                 raise RuntimeError(f"speed_down was executed as {info['behavior_executed']}")
             durations.append(info["duration_s"])

@@ -36,11 +36,14 @@ and ignored. The ego runs ``ego_fidelity`` (default continuous), background agen
 ## Rewards, ends, infos
 Per agent, the single-ego definition: r_T when an event happens (collision −50, red light −10,
 wrong lane / off-road −1; the ego also +100 goal and −50 timeout), plus, with ``reward="dense"``,
-r_k = λ(c̃_total) when the agent's behavior ends (0 in event fidelity). The ego ends by its
-episode's rules (``DrivingWorld``); a background agent is terminated only by its own collision
-(its vehicle then leaves SUMO); when the ego's episode ends every other live agent is truncated.
+r_k = λ(c̃_total) when the agent's behavior ends (0 in event fidelity), and on its last step for
+the part of the behavior its end cut short. The ego ends by its episode's rules (``DrivingWorld``);
+a background agent is terminated by its own collision or by leaving the network (its vehicle then
+leaves SUMO); when the ego's episode ends every other live agent is truncated.
 ``info``: ``decision_required``, ``action_mask``, ``events`` and ``infractions`` (its own),
-``scene`` (privileged quantities the expert reads), ``reward_components``, ``time_s``.
+``scene`` (R_t's quantities in metres and m/s, :class:`~hbmp_bench.envs.scene.Scene`; the ego's
+with its straight-line goal distance, and with ``privileged=True`` the privileged fields the
+expert reads), ``reward_components``, ``time_s``.
 
 ## Bad input
 An action for an agent that is not live (unknown or finished) raises ValueError naming the live
@@ -48,11 +51,11 @@ agents; a missing action for an agent with ``decision_required`` raises ValueErr
 outside 0..4 raises ValueError.
 
 ## Implementation
-One implementation with the gymnasium ``BehaviorEnv``: both run on ``DrivingWorld``; this env adds
-the background agents through :class:`hbmp_bench.envs.multi.TrafficWorld`. With
-``controlled="none"`` it reproduces the single-ego env step for step. :func:`ego_env` turns it back
-into a single-ego gymnasium env whose background agents are driven by a given policy (e.g. the
-expert through the behavior layer) instead of SUMO's models.
+The core of every SUMO env of the package: the gymnasium :class:`~hbmp_bench.envs.BehaviorEnv` is
+this env with no background agent (``controlled="none"``), the flat control env this env with the
+ego's ``ego_driver="control"``, and :func:`ego_env` this env seen from the ego with its background
+agents driven by a given policy. All run :class:`hbmp_bench.envs.world.DrivingWorld`, whose
+vehicles are :class:`hbmp_bench.envs.vehicle.ControlledVehicle`.
 
 ## Version history
 v0: first release.
@@ -60,7 +63,6 @@ v0: first release.
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any
 
 import gymnasium as gym
@@ -69,10 +71,10 @@ from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from hbmp_bench.envs.multi import TrafficWorld
+from hbmp_bench.envs.config import ScenarioConfig, WorldConfig
 from hbmp_bench.envs.observation import ObservationConfig, observation_space
-from hbmp_bench.envs.world import BEHAVIORS, WorldConfig
-from hbmp_bench.scenarios import check_task, check_town, get_suite, suite_episodes, traffic_for
+from hbmp_bench.envs.world import EGO_ID, DrivingWorld
+from hbmp_bench.planning.behaviors import BEHAVIORS
 
 
 def _controlled_count(controlled: str | int, vehicles: int) -> int:
@@ -92,15 +94,19 @@ class TrafficParallelEnv(ParallelEnv):
     """The multi-agent traffic environment; see the module docstring.
 
     Args:
-        town, task, suite: the scenario (as :class:`~hbmp_bench.envs.BehaviorEnv`).
-        episode_index: fix one episode of the list; None draws one per reset seed.
+        town, task, suite, episode_index, random_goals, density: the scenario
+            (:class:`~hbmp_bench.envs.config.ScenarioConfig`).
         controlled: ``"none"``, an int N or ``"all"``: background vehicles driven by agents.
         ego_fidelity / background_fidelity: ``continuous`` or ``event``.
+        ego_driver: ``behavior`` (default) or ``control`` (the flat baseline's acceleration and
+            steering, see :mod:`hbmp_bench.envs.control_env`).
         reward: ``dense`` (r_k + r_T) or ``sparse`` (r_T).
-        density: override background traffic (``empty``, ``corl``, ``regular``, ``dense``).
-        observation: ``deformed`` or ``vehicle_centric`` M_t.
+        decision_period_s: simulated time per decision in event fidelity [s].
+        observation: ``deformed`` or ``vehicle_centric`` M_t; grid options via ``observation_config``.
         render_mode: None or ``rgb_array`` (:meth:`render`: the ego-centred top-down view, with
-            every vehicle and pedestrian, after the last step).
+            every vehicle and pedestrian; :meth:`drain_frames`: one picture per SUMO step).
+        privileged: add the privileged fields to the ego's ``info["scene"]`` (for the rule-based
+            expert; see :class:`~hbmp_bench.envs.config.WorldConfig`).
     """
 
     metadata = {"name": "hbmp_traffic_v0", "render_modes": ["rgb_array"], "render_fps": 10, "is_parallelizable": True}
@@ -108,32 +114,40 @@ class TrafficParallelEnv(ParallelEnv):
     def __init__(self, town: str = "Town01", task: str = "NavigationDynamic", suite: str = "corl2017",
                  episode_index: int | None = None, controlled: str | int = "all",
                  ego_fidelity: str = "continuous", background_fidelity: str = "event", reward: str = "dense",
-                 density: str | None = None, observation: str = "deformed", render_mode: str | None = None):
+                 density: str | None = None, observation: str = "deformed", render_mode: str | None = None,
+                 random_goals: bool = False, decision_period_s: float = 0.1,
+                 observation_config: ObservationConfig | None = None, ego_driver: str = "behavior",
+                 privileged: bool = False):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None, 'rgb_array'")
-        self.town, self.task, self.suite = check_town(town), check_task(task), get_suite(suite)
-        episodes = suite_episodes(self.suite.name, self.town, self.task)
-        if density is not None:
-            traffic = traffic_for(self.town, self.task, density)
-            episodes = tuple(dataclasses.replace(e, traffic=traffic) for e in episodes)
-        if episode_index is not None and not 0 <= episode_index < len(episodes):
-            raise ValueError(f"episode_index must be in [0, {len(episodes)}), got {episode_index}")
-        self.episodes, self.episode_index = episodes, episode_index
-        vehicles = min(e.traffic.vehicles for e in (episodes if episode_index is None else episodes[episode_index:episode_index + 1]))
-        if background_fidelity not in ("event", "continuous"):
-            raise ValueError(f"background_fidelity must be 'event' or 'continuous', got {background_fidelity!r}")
-        self.n_controlled = _controlled_count(controlled, vehicles)
-        obs_cfg = ObservationConfig(kind=observation)
-        self.config = WorldConfig(fidelity=ego_fidelity, reward=reward, observation=obs_cfg)
-        self.background_fidelity = background_fidelity
-        self.possible_agents = ["ego", *(f"bg{k}" for k in range(self.n_controlled))]
+        self.scenario = ScenarioConfig(town=town, task=task, suite=suite, episode_index=episode_index,
+                                       random_goals=random_goals, density=density)
+        obs_cfg = observation_config or ObservationConfig(kind=observation)
+        self.config = WorldConfig(fidelity=ego_fidelity, ego_driver=ego_driver, background_fidelity=background_fidelity, reward=reward,
+                                  decision_period_s=decision_period_s, observation=obs_cfg, privileged=privileged)
+        self.n_controlled = _controlled_count(controlled, self.scenario.least_vehicles)
+        self.possible_agents = [EGO_ID, *(f"bg{k}" for k in range(self.n_controlled))]
         self.agents: list[str] = []
         self._observation_space = observation_space(obs_cfg)
         self._action_space = spaces.Discrete(len(BEHAVIORS))
         self.render_mode = render_mode
         self._renderer = None
-        self._world: TrafficWorld | None = None
+        self._frames: list[np.ndarray] = []
+        self._last_behavior = ""
+        self._world: DrivingWorld | None = None
         self._rng = np.random.default_rng()
+
+    @property
+    def town(self) -> str:
+        return self.scenario.town
+
+    @property
+    def task(self) -> str:
+        return self.scenario.task
+
+    @property
+    def episodes(self):
+        return self.scenario.episodes
 
     def observation_space(self, agent: str) -> spaces.Dict:
         return self._observation_space
@@ -142,26 +156,27 @@ class TrafficParallelEnv(ParallelEnv):
         return self._action_space
 
     @property
-    def world(self) -> TrafficWorld:
+    def world(self) -> DrivingWorld:
+        """The world (built on first use; SUMO starts on the first reset)."""
         if self._world is None:
-            self._world = TrafficWorld(self.town, self.config, self.n_controlled, self.background_fidelity)
+            self._world = DrivingWorld(self.scenario.town, self.config)
         return self._world
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
         if seed is not None or self._world is None:
             self._rng = np.random.default_rng(seed)
-        index = (options or {}).get("episode_index", self.episode_index)
-        if index is None:
-            index = int(self._rng.integers(len(self.episodes)))
-        obs, infos = self.world.start(self.episodes[index], seed=int(self._rng.integers(2**31)))
+        episode = self.scenario.pick(self._rng, (options or {}).get("episode_index"))
+        obs, infos = self.world.start(episode, seed=int(self._rng.integers(2**31)), controlled=self.n_controlled)
         self.agents = list(self.world.live)
+        self._frames, self._last_behavior = [], ""
+        if self.render_mode == "rgb_array":
+            self._capture()
         return obs, infos
 
-    def step(self, actions: dict[str, Any]):
-        if not self.agents:
-            raise RuntimeError("call reset() before step() (and again after the episode ends)")
-        live = set(self.agents)
-        stray = sorted(set(actions) - live)
+    def check_actions(self, actions: dict[str, Any]) -> dict[str, int]:
+        """The actions of the agents that need a decision, as ints; ValueError for bad input (see
+        the module docstring)."""
+        stray = sorted(set(actions) - set(self.agents))
         if stray:
             raise ValueError(f"actions for agents that are not live: {stray}; live agents: {self.agents}")
         world = self.world
@@ -172,27 +187,60 @@ class TrafficParallelEnv(ParallelEnv):
         for agent in self.agents:
             if world.needs_decision(agent):
                 action = actions[agent]
-                if not (isinstance(action, (int, np.integer)) and 0 <= int(action) < len(BEHAVIORS)):
+                if isinstance(action, (bool, np.bool_)) or not (
+                        isinstance(action, (int, np.integer)) and 0 <= int(action) < len(BEHAVIORS)):
                     raise ValueError(f"action of {agent} must be an int in [0, {len(BEHAVIORS)}) "
-                                     f"({', '.join(BEHAVIORS)}), got {action!r}")
+                                     f"({', '.join(BEHAVIORS)}), got {type(action).__name__} {action!r}")
                 clean[agent] = int(action)
-        result = world.step(clean)
-        self.agents = list(world.live)
+        return clean
+
+    def step(self, actions: dict[str, Any]):
+        if not self.agents:
+            raise RuntimeError("call reset() before step() (and again after the episode ends)")
+        clean = self.check_actions(actions)
+        if EGO_ID in clean:
+            self._last_behavior = BEHAVIORS[clean[EGO_ID]]
+        result = self.world.step(clean, on_substep=self._capture if self.render_mode == "rgb_array" else None)
+        self.agents = list(self.world.live)
         return result
 
+    # ------------------------------------------------------------- pictures
+    def _frame(self) -> np.ndarray:
+        from hbmp_bench.render import TopDownRenderer
+        from hbmp_bench.render.scene import scene_view
+
+        if self._renderer is None:
+            self._renderer = TopDownRenderer(self.world.net)
+        w = self.world
+        caption = f"{self.town} {self.task}  t={w.sim.time:5.1f} s  {w.ego.state.speed:4.1f} m/s  {self._last_behavior}"
+        if self.n_controlled:
+            caption += f"  {len(self.agents)} agents"
+        return self._renderer.frame(scene_view(w, caption))
+
+    def _capture(self) -> None:
+        self._frames.append(self._frame())
+
     def render(self) -> np.ndarray | None:
-        """``rgb_array``: (H, W, 3) uint8 top-down view centred on the ego (None without a render mode)."""
+        """``rgb_array``: (H, W, 3) uint8 top-down view centred on the ego, after the last SUMO
+        step (None without a render mode)."""
         if self.render_mode is None:
             return None
-        if self._world is None:
+        if self._world is None or self._world.ego is None:
             raise RuntimeError("call reset() before render()")
-        if self._renderer is None:
-            from hbmp_bench.render import TopDownRenderer
+        return self._frames[-1] if self._frames else self._frame()
 
-            self._renderer = TopDownRenderer(self.world.ego.net)
-        ego = self.world.ego
-        caption = f"{self.town} {len(self.agents)} agents  t={ego.sim.time:5.1f} s"
-        return self._renderer.frame(ego.scene_view(caption))
+    def drain_frames(self) -> list[np.ndarray]:
+        """All frames rendered at every 0.1 s simulation step since the last call (the frames
+        between decisions), oldest first; empty unless ``render_mode="rgb_array"``."""
+        frames, self._frames = self._frames, []
+        return frames
+
+    def record(self, agent: str = ""):
+        """The ego's episode record so far (:class:`~hbmp_bench.metrics.EpisodeRecord`); None before
+        the first reset."""
+        if self._world is None or self._world.episode is None:
+            return None
+        return self._world.record(agent)
 
     def close(self) -> None:
         if self._world is not None:
@@ -255,7 +303,7 @@ class EgoEnv(gym.Env):
     def step(self, action):
         if "ego" not in self.parallel.agents:
             raise RuntimeError("call reset() before step() (and again after the episode ends)")
-        actions = {**self._background_actions(), "ego": action}
+        actions = {**self._background_actions(), EGO_ID: action}
         total = 0.0
         while True:
             obs, rewards, terms, truncs, infos = self.parallel.step(actions)

@@ -101,8 +101,10 @@ class AgentDescription:
     def of(cls, agent: Any) -> "AgentDescription":
         """The description of a built agent (from its ``env_factory``, ``env_kwargs`` and
         ``fingerprint`` attributes); raises ValueError when they do not fit the schema."""
+        from hbmp_bench.agents.base import agent_env_kwargs
+
         factory = getattr(agent, "env_factory", None)
-        kwargs = dict(getattr(agent, "env_kwargs", None) or {})
+        kwargs = agent_env_kwargs(agent)
         return parse_description(json.dumps({"env_factory": factory, "env_kwargs": kwargs,
                                              "fingerprint": str(getattr(agent, "fingerprint", "") or "")}))
 

@@ -35,13 +35,13 @@ def _limits(args: argparse.Namespace):
 
 
 def _add_selection(p: argparse.ArgumentParser, agent_default: str | None) -> None:
-    p.add_argument("--suite", default="corl2017")
+    p.add_argument("--suite", default="corl2017", help="episode suite (hbmp-bench list shows them)")
     if agent_default is None:
         p.add_argument("--agent", required=True, help="registry name, module:Class or checkpoint")
     else:
         p.add_argument("--agent", default=agent_default, help="registry name, module:Class or checkpoint")
     p.add_argument("--towns", "--town", nargs="*", help="built-in or imported maps; default: the suite's")
-    p.add_argument("--tasks", nargs="*", help="default: the suite's")
+    p.add_argument("--tasks", nargs="*", help="Straight, OneTurn, Navigation, NavigationDynamic; default: the suite's")
     p.add_argument("--episodes", type=int, default=None, help="first N episodes per (town, task); default: all")
     p.add_argument("--fidelity", default=None, help="world fidelity; default: the env's default (recorded)")
     p.add_argument("--workers", type=int, default=None, help="parallel slots; default: one per core")
@@ -66,7 +66,7 @@ def _add_selection(p: argparse.ArgumentParser, agent_default: str | None) -> Non
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from hbmp_bench.evaluation.evaluate import evaluate
     from hbmp_bench.metrics.report import records_frame, success_table
-    from hbmp_bench.metrics.summary import summarize
+    from hbmp_bench.metrics.summary import SUCCESS_TABLE_TITLE, summarize, summary_lines
 
     result = evaluate(args.suite, args.agent, towns=args.towns, tasks=args.tasks, episodes=args.episodes,
                       fidelity=args.fidelity, out_dir=args.out, workers=args.workers, backend=args.backend,
@@ -78,14 +78,15 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         print(json.dumps(summary, indent=2))
         return 0
     if result.records:
+        print(SUCCESS_TABLE_TITLE)
         print(success_table(records_frame(result.records)).to_string())
-    for key, value in summary.items():
-        print(f"{key:24s} {value}")
+        print()
+    print("\n".join(summary_lines(summary)))
     return 0
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from hbmp_bench.metrics.report import build_report, view_rows, write_report
+    from hbmp_bench.metrics.report import VIEW_LEGENDS, build_report, readable, view_rows, write_report
 
     rep = build_report(args.paths)
     first = Path(args.paths[0])
@@ -96,8 +97,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
                           **{name: view_rows(view) for name, view in rep.views.items()}}, indent=2))
         return 0
     for name, view in rep.views.items():
-        print(f"== {name}")
-        print(view.to_string() if not view.empty else "(no episodes)")
+        print(f"== {name}: {VIEW_LEGENDS[name]}")
+        print(readable(view).to_string() if not view.empty else "(no episodes)")
         print()
     print(f"written to {out}/ (CSV, markdown, failures.png, report.md)")
     return 0
@@ -134,7 +135,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("report", help="tables (CSV, markdown) and a failure bar chart from records")
     p.add_argument("paths", nargs="+", metavar="DIR", help="records folders or .jsonl files (one result set each)")
     p.add_argument("--out", default=None, help="output folder (default: <first DIR>/report)")
-    p.add_argument("--json", action="store_true")
+    p.add_argument("--json", action="store_true", help="print every view as JSON rows (inf as null)")
     p.set_defaults(func=_cmd_report)
 
     p = sub.add_parser("leaderboard", help="submit an agent to a suite's leaderboard, add or render results")
@@ -144,9 +145,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     q.add_argument("--board-dir", default="leaderboards", help="leaderboard folder (default: leaderboards)")
     q.add_argument("--records-dir", default=None, help="raw records (default: <board>/<suite>/runs/<hash>)")
     q = lsub.add_parser("add", help="check a results file made elsewhere and add it to its board")
-    q.add_argument("file")
-    q.add_argument("--board-dir", default="leaderboards")
+    q.add_argument("file", help="results JSON written by leaderboard submit")
+    q.add_argument("--board-dir", default="leaderboards", help="leaderboard folder")
     q = lsub.add_parser("render", help="regenerate <board>/<suite>/README.md")
-    q.add_argument("--suite", default="corl2017")
-    q.add_argument("--board-dir", default="leaderboards")
+    q.add_argument("--suite", default="corl2017", help="the suite whose board to render")
+    q.add_argument("--board-dir", default="leaderboards", help="leaderboard folder")
     p.set_defaults(func=_cmd_leaderboard)

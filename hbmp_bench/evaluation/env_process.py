@@ -21,7 +21,6 @@ next episode.
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import time
 import traceback
 from multiprocessing import reduction
@@ -30,6 +29,8 @@ from typing import Any
 
 import numpy as np
 
+from hbmp_bench import rollout
+from hbmp_bench.plugins import resolve
 from hbmp_bench.evaluation import channel
 from hbmp_bench.evaluation.sandbox import protect_process
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, adopt_environment, watch_lifeline
@@ -50,8 +51,7 @@ def build_env(task: EpisodeTask, factory: str | None, env_kwargs: dict | None = 
 
         make = BehaviorEnv
     else:
-        module_name, _, attr = factory.partition(":")
-        make = getattr(importlib.import_module(module_name), attr)
+        make = resolve(factory, "env factory")
     return make(town=task.town, task=task.task, suite=task.suite, fidelity=task.fidelity, **(env_kwargs or {}))
 
 
@@ -88,10 +88,10 @@ def blank_record(task: EpisodeTask, end_reason: str, error: str) -> EpisodeRecor
 def partial_record(env: Any, task: EpisodeTask, end_reason: str, error: str) -> EpisodeRecord:
     """The record of a started episode cut short: what the world measured so far (route
     completion, infractions, distance), never a success; an ``agent_error`` scores 0."""
-    world = getattr(getattr(env, "unwrapped", env), "world", None)
-    if world is None or getattr(world, "episode", None) is None:
+    record_of = getattr(getattr(env, "unwrapped", env), "record", None)
+    record = record_of(task.agent) if record_of is not None else None
+    if record is None:
         return blank_record(task, end_reason, error)
-    record = world.record(task.agent)
     score = 0.0 if end_reason == AGENT_ERROR else record.driving_score
     return dataclasses.replace(record, success=False, timeout=False, driving_score=score, end_reason=end_reason,
                                error=error)
@@ -158,6 +158,24 @@ class _EnvSlot:
         self.env, self.key = None, None
 
 
+class _Numbered:
+    """The agent link as an agent of :func:`hbmp_bench.rollout.run_episode`: it numbers the
+    decisions for the channel and times each answer [s] into ``times``."""
+
+    def __init__(self, link: _AgentLink, times: list[float]):
+        self.link, self.times, self.decisions = link, times, 0
+
+    def reset(self, info: dict) -> None:
+        self.link.reset(info)
+
+    def act(self, observation, info: dict):
+        start = time.perf_counter()
+        action = self.link.act(observation, info, self.decisions)
+        self.times.append(time.perf_counter() - start)
+        self.decisions += 1
+        return action
+
+
 def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits: RunnerLimits, beat) -> dict:
     """Run one episode; returns the outcome dict sent to the pool (record, status, restart, timings)."""
     times: list[float] = []
@@ -175,40 +193,29 @@ def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits
         return outcome(blank_record(task, AGENT_ERROR, str(exc)), AGENT_ERROR, False)
     try:
         env = env_slot.get(task)
-        beat(force=True)
-        obs, info = env.reset(seed=task.episode, options={"episode_index": task.episode})
     except Exception:  # noqa: BLE001
         return outcome(blank_record(task, SIM_ERROR, "env reset raised:\n" + traceback.format_exc(limit=-8)), SIM_ERROR, True)
     beat(force=True)
-    try:
-        agent.reset(info)
-    except AgentFailure as exc:
-        return outcome(partial_record(env, task, AGENT_ERROR, str(exc)), AGENT_ERROR, False)
-    decisions = 0
-    while True:
-        if limits.max_decisions is not None and decisions >= limits.max_decisions:
-            return outcome(partial_record(env, task, DECISION_CAP, ""), "ok", False)
-        start = time.perf_counter()
-        try:
-            action = agent.act(obs, info, decisions)
-        except AgentFailure as exc:
-            return outcome(partial_record(env, task, AGENT_ERROR, str(exc)), AGENT_ERROR, False)
-        times.append(time.perf_counter() - start)
+
+    def check(action, decisions: int):
         if not _valid_action(env.action_space, action):
-            error = f"invalid action {action!r} at decision {decisions}: want an element of {env.action_space}"
-            return outcome(partial_record(env, task, AGENT_ERROR, error), AGENT_ERROR, False)
-        if isinstance(action, tuple):
-            action = np.asarray(action, dtype=env.action_space.dtype)
-        try:
-            obs, _, terminated, truncated, info = env.step(action)
-        except Exception:  # noqa: BLE001
-            error = f"env step raised at decision {decisions}:\n" + traceback.format_exc(limit=-8)
-            return outcome(blank_record(task, SIM_ERROR, error), SIM_ERROR, True)
-        decisions += 1
-        beat()
-        if terminated or truncated:
-            record = dataclasses.replace(EpisodeRecord(**info["episode"]), agent=task.agent)
-            return outcome(record, "ok", False)
+            raise ValueError(f"invalid action {action!r} at decision {decisions}: want an element of {env.action_space}")
+        return np.asarray(action, dtype=env.action_space.dtype) if isinstance(action, tuple) else action
+
+    hooks = rollout.EpisodeHooks(on_reset=lambda obs, info: beat(force=True), check_action=check,
+                                 on_step=lambda *step: beat())
+    try:
+        run = rollout.run_episode(env, _Numbered(agent, times), seed=task.episode, options={"episode_index": task.episode},
+                                  max_decisions=limits.max_decisions, hooks=hooks)
+    except rollout.AgentFailed as exc:
+        return outcome(partial_record(env, task, AGENT_ERROR, str(exc)), AGENT_ERROR, False)
+    except rollout.EnvFailed as exc:
+        where = "env reset raised" if exc.phase == "reset" else f"env step raised at decision {exc.decisions}"
+        trace = "".join(traceback.format_exception(exc.__cause__, limit=-8))
+        return outcome(blank_record(task, SIM_ERROR, f"{where}:\n{trace}"), SIM_ERROR, True)
+    if not run.ended:
+        return outcome(partial_record(env, task, DECISION_CAP, ""), "ok", False)
+    return outcome(dataclasses.replace(EpisodeRecord(**run.info["episode"]), agent=task.agent), "ok", False)
 
 
 def env_main(pool_conn: Connection, limits: RunnerLimits, lifeline: Connection,

@@ -50,6 +50,8 @@ class EvaluationResult:
         ran / skipped: episodes run by this call / found already finished in the file.
         wall_s: wall time of this call [s].
         missing: selected episodes with no record (the run was interrupted).
+        privileged: the env gave the agent the privileged scene fields (it asked for them, or
+            the evaluator's limits set them): its scores are not comparable with a learned agent's.
     """
 
     path: Path
@@ -58,6 +60,7 @@ class EvaluationResult:
     skipped: int
     wall_s: float
     missing: int
+    privileged: bool = False
 
     @property
     def sim_errors(self) -> int:
@@ -201,7 +204,7 @@ def evaluate(
     wanted = {t.key: k for k, t in enumerate(selection)}
     records = sorted((r for r in latest_per_key(ledger.records()) if r.key in wanted), key=lambda r: wanted[r.key])
     return EvaluationResult(path, tuple(records), ran, len(selection) - len(todo), time.perf_counter() - start,
-                            len(selection) - len(records))
+                            len(selection) - len(records), privileged=is_privileged(limits))
 
 
 def code_fingerprint() -> str:
@@ -253,24 +256,39 @@ def check_provenance(path: Path, agent: str, fingerprint: str, towns: Sequence[s
         os.replace(tmp, side)
 
 
+def is_privileged(limits: RunnerLimits) -> bool:
+    """Whether envs made with ``limits`` give the agent the privileged scene fields."""
+    from hbmp_bench.agents.base import PRIVILEGED_OPTION
+
+    return dict(limits.env_kwargs).get(PRIVILEGED_OPTION) is True
+
+
 def with_agent_env(limits: RunnerLimits, agent: AgentDescription) -> RunnerLimits:
     """``limits`` with the env the agent asks for: an agent may name an ``env_factory`` from
     ``AGENT_ENV_FACTORIES`` (the flat baseline's control env) and ``env_kwargs`` that change what
     its policy sees (``agents.learned.OBSERVATION_OPTIONS``: the observation kind it was trained
-    with). Anything else is refused with ValueError: an agent must not pick an easier env or run
-    its own code in the env process. Explicit limits win."""
+    with) or ``privileged`` (``agents.base.PRIVILEGED_OPTION``: the privileged scene fields, which
+    any agent may ask for; its results are then marked privileged, see :func:`is_privileged`).
+    Anything else is refused with ValueError: an agent must not pick an easier env or run its own
+    code in the env process. Explicit limits win."""
+    from hbmp_bench.agents.base import PRIVILEGED_OPTION
     from hbmp_bench.agents.learned import OBSERVATION_OPTIONS
 
     if agent.env_factory is not None and agent.env_factory not in AGENT_ENV_FACTORIES:
         raise ValueError(f"the agent asks for env_factory {agent.env_factory!r}; an agent may only ask for "
                          f"{list(AGENT_ENV_FACTORIES)} (the evaluator can set another with RunnerLimits.env_factory)")
-    unknown = sorted(k for k, _ in agent.env_kwargs if k not in OBSERVATION_OPTIONS)
+    allowed = (*OBSERVATION_OPTIONS, PRIVILEGED_OPTION)
+    unknown = sorted(k for k, _ in agent.env_kwargs if k not in allowed)
     if unknown:
-        raise ValueError(f"the agent asks for env options {unknown}; an agent may only set {list(OBSERVATION_OPTIONS)}")
+        raise ValueError(f"the agent asks for env options {unknown}; an agent may only set {list(allowed)}")
+    from hbmp_bench.envs.config import WorldConfig
     from hbmp_bench.envs.observation import ObservationConfig
 
-    if "observation" in dict(agent.env_kwargs):  # checked here: not a sim_error in every episode
-        ObservationConfig(kind=dict(agent.env_kwargs)["observation"])
+    asked = dict(agent.env_kwargs)
+    if "observation" in asked:  # checked here: not a sim_error in every episode
+        ObservationConfig(kind=asked["observation"])
+    if PRIVILEGED_OPTION in asked:
+        WorldConfig(privileged=asked[PRIVILEGED_OPTION])
     factory = limits.env_factory or agent.env_factory
     kwargs = {**dict(agent.env_kwargs), **dict(limits.env_kwargs)}
     return dataclasses.replace(limits, env_factory=factory, env_kwargs=tuple(kwargs.items()))

@@ -18,7 +18,15 @@ Rules:
 - A results file whose suite definition hash differs from the installed suite's is refused
   (``StaleResultsError``) when it is added and when the README is generated: its episodes are not
   the current suite's.
-- Entries are ranked by success %, then driving score.
+- Complete entries are ranked by success %, then driving score. Partial runs are listed below them,
+  unranked and ordered by what they cover, never by their scores: full-suite runs with missing
+  episodes or sim errors first, then subsets; the most episodes first (a 2-episode run's 100 %
+  is not above a 200-episode run's 90 %). Every row shows its episodes as "scored of the whole
+  suite's".
+- An entry whose agent read the privileged scene fields (it asked for ``privileged=True``, as the
+  rule-based expert does: light schedules, junction foes, the leader; see
+  ``hbmp_bench.envs.privileged``) is marked ``privileged`` in its results file and in the
+  README's tables: it is a reference, not comparable with an agent that sees M_t and R_t only.
 """
 
 from __future__ import annotations
@@ -34,12 +42,13 @@ from hbmp_bench.evaluation.integrity import BoardSnapshot
 from hbmp_bench.evaluation.provenance import git_commit, library_versions, machine_description, utc_now
 from hbmp_bench.evaluation.tasks import RunnerLimits, agent_slug, suite_tasks
 from hbmp_bench.metrics import report
-from hbmp_bench.metrics.records import SIM_ERROR, EpisodeRecord
+from hbmp_bench.metrics.records import DRIVING_SCORE_DEFINITION, SIM_ERROR, EpisodeRecord
 from hbmp_bench.metrics.summary import summarize
 from hbmp_bench.scenarios import TASK_LABELS, TASKS, get_suite
 
-RESULTS_FORMAT = 1
-"""Version of the results file layout."""
+RESULTS_FORMAT = 2
+"""Version of the results file layout (2: the ``privileged`` flag). A format-1 file reads as
+privileged: before the flag every agent was handed the privileged scene fields."""
 
 EPISODE_COLUMNS = (
     "town", "task", "episode", "seed", "success", "route_completion", "driving_score", "collision_vehicle",
@@ -80,8 +89,10 @@ def results_document(
     wall_s: float | None = None,
     workers: int | None = None,
     backend: str = "process",
+    privileged: bool = False,
 ) -> dict:
-    """The results file content for ``records`` of a selection of ``suite``."""
+    """The results file content for ``records`` of a selection of ``suite``; ``privileged``: the
+    agent read the privileged scene fields (``EvaluationResult.privileged``)."""
     spec = get_suite(suite)
     full = (set(towns) == set(spec.towns) and set(tasks) == set(spec.tasks)
             and list(episodes) == list(range(spec.episodes_per_task)))
@@ -105,6 +116,7 @@ def results_document(
         "suite_hash": spec.definition_hash(),
         "agent": agent,
         "fidelity": fidelity,
+        "privileged": bool(privileged),
         "complete": full and len(records) == expected and sim_errors == 0,
         "subset": not full,
         "selection": {"towns": list(towns), "tasks": list(tasks), "episodes": list(episodes)},
@@ -132,9 +144,14 @@ def results_document(
 
 def check_results(doc: dict, source: str = "results") -> dict:
     """``doc`` if it is a results file of the installed suite whose ``complete`` and ``sim_errors``
-    agree with its episodes; else a clear error."""
+    agree with its episodes; else a clear error. A format-1 file is read as format 2 with
+    ``privileged`` true (see :data:`RESULTS_FORMAT`)."""
+    if isinstance(doc, dict) and doc.get("format") == 1 and "privileged" not in doc:
+        doc = {**doc, "format": RESULTS_FORMAT, "privileged": True}
     if not isinstance(doc, dict) or doc.get("format") != RESULTS_FORMAT or "suite" not in doc:
         raise ValueError(f"{source} is not a leaderboard results file (format {RESULTS_FORMAT})")
+    if not isinstance(doc.get("privileged"), bool):
+        raise ValueError(f"{source} has no privileged flag (true or false)")
     episodes = doc.get("episodes")
     if not isinstance(episodes, list) or not all(isinstance(e, dict) for e in episodes):
         raise ValueError(f"{source} has no list of episodes")
@@ -180,7 +197,20 @@ def load_entries(board_dir: str | os.PathLike, suite: str) -> list[dict]:
 
 
 def _rank_key(doc: dict) -> tuple:
+    """Order of complete entries: success %, then driving score, best first."""
     return (-doc["summary"].get("success_pct", 0.0), -doc["summary"].get("mean_driving_score", 0.0), doc["agent"])
+
+
+def _partial_key(doc: dict) -> tuple:
+    """Order of partial runs, by what they cover: full-suite runs (missing episodes or sim errors)
+    before subsets, then the most scored episodes first; scores only break ties."""
+    return (bool(doc.get("subset")), -doc["summary"].get("episodes", 0), *_rank_key(doc))
+
+
+def _suite_episodes(suite: str) -> int:
+    """Episodes of the whole suite (every town, task and episode)."""
+    spec = get_suite(suite)
+    return len(spec.towns) * len(spec.tasks) * spec.episodes_per_task
 
 
 def _row(doc: dict, rank: str) -> list[str]:
@@ -188,17 +218,20 @@ def _row(doc: dict, rank: str) -> list[str]:
     by_task = doc["aggregates"].get("success_pct_by_task", {})
     km = s.get("km_per_infraction")
     return [
-        rank, f"`{doc['agent']}`", f"{s.get('success_pct', 0.0):.1f}",
+        rank, f"`{doc['agent']}`", "yes" if doc["privileged"] else "no", f"{s.get('success_pct', 0.0):.1f}",
         *(f"{by_task[t]:.1f}" if t in by_task else "–" for t in TASKS),
         f"{s.get('mean_driving_score', 0.0):.1f}", f"{100.0 * s.get('mean_route_completion', 0.0):.1f}",
-        "∞" if km is None else f"{km:.2f}", str(s.get("episodes", 0)),
+        NO_INFRACTION if km is None else f"{km:.2f}", f"{s.get('episodes', 0)} of {_suite_episodes(doc['suite'])}",
         str(doc.get("sim_errors", 0)),
         prov.get("package_version") or "", (prov.get("git_commit") or "")[:10], (prov.get("date_utc") or "")[:10],
         "" if prov.get("wall_time_s") is None else f"{prov['wall_time_s']:.0f}",
     ]
 
 
-HEADER = ["rank", "agent", "success %", *(TASK_LABELS[t] + " %" for t in TASKS), "driving score",
+NO_INFRACTION = "no infraction"
+"""km / infraction of an entry without any infraction event."""
+
+HEADER = ["rank", "agent", "privileged", "success %", *(TASK_LABELS[t] + " %" for t in TASKS), "driving score",
           "route completion %", "km / infraction", "episodes", "sim errors", "version", "commit", "date", "wall s"]
 
 
@@ -219,11 +252,14 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
         f"{spec.description}\n",
         f"Suite definition hash `{spec.definition_hash()}`: {len(spec.towns)} towns × {len(spec.tasks)} tasks × "
         f"{spec.episodes_per_task} episodes. Generated from the `*.json` results files by "
-        f"`hbmp-bench leaderboard render --suite {spec.name}`; do not edit by hand. Ranked by success %, then "
-        "driving score (CARLA Leaderboard, 0–100); km / infraction counts collisions, wrong lane, off-road and "
-        "red lights; wall s is the submission's wall time with its `workers` (see each results file). Agent "
-        "errors count as failed episodes; sim errors (the simulator failed, not the agent) are not scored, and an "
-        "entry with any is not ranked.\n",
+        f"`hbmp-bench leaderboard render --suite {spec.name}`; do not edit by hand. Complete entries are ranked by "
+        f"success % (episodes that reached the goal), then driving score: the mean over episodes of the "
+        f"{DRIVING_SCORE_DEFINITION}. km / infraction: km driven per infraction event (collisions, wrong lane, "
+        "off-road and red lights; an episode can have several); episodes: scored of the whole suite's; wall s is the "
+        "submission's wall time with its `workers` (see each results file). Agent errors count as failed episodes; sim errors (the simulator failed, not the agent) are not scored, and an "
+        "entry with any is not ranked. An agent marked privileged read the simulator's privileged scene (light "
+        "schedules, junction foes, the leader; the rule-based expert, a reference): not comparable with an agent "
+        "that sees M_t and R_t only.\n",
     ]
     if not ranked:
         parts.append("No complete entries yet.\n")
@@ -233,8 +269,10 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
         parts.append(_table(_row(e, str(k)) for k, e in enumerate(group, start=1)))
     if partial:
         parts.append("## Partial runs (not ranked)\n")
-        parts.append("Subsets of the suite, or runs with missing episodes or sim errors.\n")
-        parts.append(_table(_row(e, "–") for e in sorted(partial, key=_rank_key)))
+        parts.append("Runs with missing episodes or sim errors, then subsets of the suite, listed by the episodes "
+                     "they cover (most first), not by score: their figures are over their own episodes only and do "
+                     "not compare with the ranked entries.\n")
+        parts.append(_table(_row(e, "–") for e in sorted(partial, key=_partial_key)))
     path = Path(board_dir) / spec.name / "README.md"
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")
@@ -288,6 +326,7 @@ def submit(
         towns=list(dict.fromkeys(t.town for t in selection)), tasks=list(dict.fromkeys(t.task for t in selection)),
         episodes=sorted({t.episode for t in selection}), fidelity=selection[0].fidelity,
         wall_s=result.wall_s if result.skipped == 0 else None, workers=workers or os.cpu_count(), backend=backend,
+        privileged=result.privileged,
     )
     snapshot.check_unchanged()
     path = write_json(entry_path(board_dir, spec.name, agent, doc["subset"], doc["fidelity"]), doc)

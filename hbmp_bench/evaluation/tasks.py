@@ -119,7 +119,7 @@ class RunnerLimits:
 def default_fidelity() -> str:
     """The fidelity ``BehaviorEnv`` uses when none is given (recorded with every episode)."""
     from hbmp_bench.envs.behavior_env import BehaviorEnv
-    from hbmp_bench.envs.world import WorldConfig
+    from hbmp_bench.envs.config import WorldConfig
 
     default = inspect.signature(BehaviorEnv).parameters["fidelity"].default
     return default if isinstance(default, str) else WorldConfig().fidelity
@@ -164,7 +164,7 @@ def suite_tasks(
         if bad or not indices:
             raise ValueError(f"episode indices must be in [0, {spec.episodes_per_task}), got {bad or 'none'}")
     fidelity = fidelity or default_fidelity()
-    from hbmp_bench.envs.world import WorldConfig
+    from hbmp_bench.envs.config import WorldConfig
 
     WorldConfig(fidelity=fidelity)  # a bad fidelity fails here, naming the valid ones, not in every episode
     order = {t: k for k, t in enumerate(TASKS)}

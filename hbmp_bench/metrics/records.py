@@ -15,6 +15,12 @@ PENALTIES = {
 }
 """CARLA Leaderboard 1.0 infraction penalty factors (multiplied once per event)."""
 
+DRIVING_SCORE_DEFINITION = (
+    "driving score (0-100) = route completion % x infraction penalty, the product of "
+    + ", ".join(f"{factor:g} per {kind.replace('_', ' ')}" for kind, factor in PENALTIES.items())
+    + " (CARLA Leaderboard 1.0)")
+"""One-line definition of :func:`driving_score` for printed tables and legends."""
+
 AGENT_ERROR = "agent_error"
 """end_reason of an episode whose agent raised, hung past the decision timeout, died, broke the
 channel's protocol (a malformed, oversized or unsolicited reply) or returned an invalid action:

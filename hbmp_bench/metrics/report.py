@@ -16,7 +16,8 @@ Views (``build_report``):
                    in both; under CoRL2017 rules a successful episode can also have infractions.
     driving        CARLA Leaderboard driving score and route completion (means over episodes, %),
                    per (set, town) and over all towns.
-    km_between     km driven per infraction event, per set and kind (inf: no such event).
+    km_between     km driven per infraction event, per set and kind (inf: no such event; printed
+                   and in markdown as "no event").
     route_length   per (set, town, task) the distance driven ÷ route length of the episodes that
                    reached the goal (median, min, max): about 1 when route lengths are what a
                    car drives, since the goal is reached within a couple of metres.
@@ -33,7 +34,15 @@ from pathlib import Path
 
 import pandas as pd
 
-from hbmp_bench.metrics.records import AGENT_ERROR, DECISION_CAP, SIM_ERROR, EpisodeRecord, latest_per_key, read_records
+from hbmp_bench.metrics.records import (
+    AGENT_ERROR,
+    DECISION_CAP,
+    DRIVING_SCORE_DEFINITION,
+    SIM_ERROR,
+    EpisodeRecord,
+    latest_per_key,
+    read_records,
+)
 from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS
 
 OUTCOMES = ("success", "wrong_lane", "collision", "red_light", "timeout", "agent_error")
@@ -43,6 +52,25 @@ INFRACTIONS = ("collision", "collision_vehicle", "collision_pedestrian", "wrong_
 """Event kinds of the km-between-infractions view (``collision`` = all collisions)."""
 
 EXCLUDED = (SIM_ERROR, DECISION_CAP)
+
+NO_EVENT = "no event"
+"""How printed and markdown tables show a km-between-infractions value with no such event (inf
+in the CSV, null in JSON)."""
+
+VIEW_LEGENDS: dict[str, str] = {
+    "success": "Success %: episodes that reached the goal, of the scored episodes, per task and town.",
+    "failures": "Number of EPISODES with each outcome (an episode that ran three red lights counts once "
+                "under red_light; one episode can count under several outcomes; wrong_lane includes off-road).",
+    "driving": "Means over episodes: " + DRIVING_SCORE_DEFINITION + "; route_completion_pct: % of the route "
+               "driven; success_pct: % of episodes that reached the goal.",
+    "km_between": "km driven per infraction EVENT of each kind (three red lights in one episode are three "
+                  f"events); '{NO_EVENT}': none of that kind happened (inf in the CSV).",
+    "route_length": "Episodes that reached the goal: distance driven / route length (about 1 when route "
+                    "lengths are what a car drives).",
+    "coverage": "Episodes scored per result set; simulator errors and decision-capped smoke episodes are left "
+                "out of every table; agent errors count as failed episodes.",
+}
+"""One-line meaning and units of each view of :func:`build_report`, printed above it."""
 
 
 def records_files(paths: Iterable[str | os.PathLike]) -> list[Path]:
@@ -277,6 +305,11 @@ def view_rows(df: pd.DataFrame) -> list[dict]:
     return [{k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()} for row in rows]
 
 
+def readable(df: pd.DataFrame) -> pd.DataFrame:
+    """``df`` for printing: inf (no such infraction event) shown as :data:`NO_EVENT`."""
+    return df.mask(df.isin([math.inf]), NO_EVENT)
+
+
 def to_markdown(df: pd.DataFrame) -> str:
     """A GitHub markdown table of ``df`` (index included; floats in their shortest form)."""
     flat = flat_frame(df)
@@ -290,7 +323,7 @@ def to_markdown(df: pd.DataFrame) -> str:
 def _cell(value) -> str:
     if isinstance(value, float):
         if math.isinf(value):
-            return "inf"
+            return NO_EVENT
         if math.isnan(value):
             return ""
         return f"{value:g}"
@@ -344,7 +377,7 @@ def write_report(report: Report, out_dir: str | os.PathLike) -> list[Path]:
         written.append(_write_text(out / f"{name}.csv", view.to_csv()))
         markdown = to_markdown(view) if not view.empty else "(no episodes)\n"
         written.append(_write_text(out / f"{name}.md", markdown))
-        sections.append(f"## {name}\n\n{markdown}")
+        sections.append(f"## {name}\n\n{VIEW_LEGENDS[name]}\n\n{markdown}")
     if not report["failures"].empty:
         written.append(plot_failures(report["failures"], out / "failures.png"))
         sections.append("![failures per town](failures.png)\n")

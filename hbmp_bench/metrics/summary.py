@@ -6,7 +6,7 @@ from collections.abc import Iterable
 
 import pandas as pd
 
-from hbmp_bench.metrics.records import EpisodeRecord
+from hbmp_bench.metrics.records import DRIVING_SCORE_DEFINITION, EpisodeRecord
 from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS
 
 
@@ -36,6 +36,38 @@ def summarize(records: Iterable[EpisodeRecord]) -> dict:
         "decisions": int(df["decisions"].sum()),
         "distance_km": float(df["distance_m"].sum() / 1000.0),
     }
+
+
+SUMMARY_LEGEND: dict[str, str] = {
+    "episodes": "episodes run",
+    "success_rate": "fraction of episodes that reached the goal (0-1)",
+    "collisions": "collision events (vehicles, pedestrians, other obstacles), summed over episodes",
+    "collision_vehicle": "collision events with vehicles",
+    "collision_pedestrian": "collision events with pedestrians",
+    "wrong_lane": "wrong-lane events (entries into a lane running the other way)",
+    "red_light": "red-light events (stop lines crossed on red; an episode can have several)",
+    "off_road": "off-road events",
+    "timeouts": "episodes that ran out of time",
+    "mean_route_completion": "fraction of the route driven, mean over episodes (0-1)",
+    "mean_driving_score": "mean over episodes of the " + DRIVING_SCORE_DEFINITION,
+    "decisions": "behavior decisions taken, all episodes",
+    "distance_km": "km driven, all episodes",
+}
+"""What each :func:`summarize` key means, with its unit (the legend of printed summaries)."""
+
+
+def summary_lines(summary: dict) -> list[str]:
+    """``key  value  (meaning)`` lines of a summary dict, the meaning from :data:`SUMMARY_LEGEND`
+    (keys without one, such as paths and counts named in full, get none)."""
+    lines = []
+    for key, value in summary.items():
+        text = f"{value:.4g}" if isinstance(value, float) else str(value)
+        meaning = SUMMARY_LEGEND.get(key)
+        lines.append(f"{key:24s} {text:>10s}" + (f"   {meaning}" if meaning else ""))
+    return lines
+
+
+SUCCESS_TABLE_TITLE = "success % (episodes that reached the goal), task rows x town columns:"
 
 
 def success_table(records: Iterable[EpisodeRecord]) -> pd.DataFrame:

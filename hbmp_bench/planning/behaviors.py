@@ -50,7 +50,7 @@ import math
 from dataclasses import dataclass
 from enum import IntEnum
 
-__all__ = ["Behavior", "BehaviorConfig", "reference_speed"]
+__all__ = ["BEHAVIORS", "Behavior", "BehaviorConfig", "reference_speed"]
 
 
 class Behavior(IntEnum):
@@ -61,6 +61,10 @@ class Behavior(IntEnum):
     CHANGE_LEFT = 2
     CHANGE_RIGHT = 3
     KEEP = 4
+
+
+BEHAVIORS = tuple(b.name.lower() for b in Behavior)
+"""The behaviors' names in the paper's order (``BEHAVIORS[b]`` names behavior ``b``)."""
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ import json
 def _cmd_record(args: argparse.Namespace) -> int:
     from PIL import Image
 
-    from hbmp_bench.render.video import record_episode
+    from hbmp_bench.envs.recording import record_episode
 
     town = {} if args.town is None else {"town": args.town}
     record = record_episode(args.env, args.agent, args.out, episode_index=args.episode, suite=args.suite,
@@ -64,7 +64,7 @@ def add_commands(subparsers) -> None:
     p.add_argument("--town", default=None, help="built-in or imported map; replaces the env id's town")
     p.add_argument("--agent", default="expert", help="registry name or module:Class")
     p.add_argument("--episode", type=int, default=0, help="episode index in the suite")
-    p.add_argument("--suite", default="corl2017")
+    p.add_argument("--suite", default="corl2017", help="episode suite (hbmp-bench list shows them)")
     p.add_argument("--fidelity", default=None, help="default: the env's")
     p.add_argument("--every", type=int, default=1, help="keep every K-th 0.1 s frame")
     p.add_argument("--max-decisions", type=int, default=None, help="stop after N decisions")

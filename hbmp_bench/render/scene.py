@@ -121,3 +121,21 @@ class SceneView:
     @property
     def n_actors(self) -> int:
         return len(self.actors_xy)
+
+
+def scene_view(world, caption: str = "") -> SceneView:
+    """The picture of a driving world's instant, centred on its ego
+    (:class:`hbmp_bench.envs.world.DrivingWorld`, read through its public attributes)."""
+    ego, net, sim = world.ego, world.net, world.sim
+    state, actors, plan = ego.state, ego.actors, ego.driver.last_plan
+    return SceneView(
+        ego_xy=state.xy, ego_yaw=state.yaw, ego_length=ego.vtype.length, ego_width=ego.vtype.width,
+        ego_speed=state.speed, actors_xy=actors.xy, actors_yaw=actors.yaw, actors_length=actors.length,
+        actors_width=actors.width, actors_is_pedestrian=actors.is_pedestrian,
+        light_states={k: v for k, v in sim.light_states().items() if k in net.lanes},
+        route_edges=ego.route.edges, goal_xy=ego.route.goal_xy,
+        plan_trajectories=None if plan is None else plan.trajectories[:, :, :2],
+        plan_feasible=None if plan is None else plan.feasible,
+        plan_chosen=None if plan is None else plan.chosen,
+        time_s=sim.time, caption=caption,
+    )

@@ -36,7 +36,7 @@ def stopping_figure(path: str | os.PathLike, town: str = "Town01", dpi: int = 15
     from matplotlib.figure import Figure  # no pyplot: renders with Agg, never touches the user's backend
 
     from hbmp_bench.envs.stopping import LAWFUL_DECEL, REACTION_S, lawful_stopping_distance, measure_stop
-    from hbmp_bench.envs.world import WorldConfig
+    from hbmp_bench.envs.config import WorldConfig
     from hbmp_bench.render.video import atomic_write
 
     path = Path(path)

@@ -1,5 +1,5 @@
-"""Frames to files: animated GIFs (Pillow), MP4 when ``imageio-ffmpeg`` is installed, and
-:func:`record_episode`, which runs an agent on one episode and writes what it rendered.
+"""Frames to files: animated GIFs (Pillow), MP4 when ``imageio-ffmpeg`` is installed (an agent's
+episode is recorded by :func:`hbmp_bench.envs.recording.record_episode`).
 
 Files are written atomically: to a temporary file beside the target, then renamed.
 """
@@ -10,7 +10,6 @@ import os
 import uuid
 from collections.abc import Iterable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from PIL import Image
@@ -131,93 +130,3 @@ def write_video(frames: Iterable, path: str | os.PathLike, fps: float = 10.0) ->
     """:func:`write_gif` or :func:`write_mp4`, chosen by the path's suffix."""
     path = check_video_path(path)
     return write_mp4(frames, path, fps) if path.suffix.lower() == ".mp4" else write_gif(frames, path, fps)
-
-
-def record_episode(
-    env_id: str,
-    agent: str,
-    path: str | os.PathLike,
-    episode_index: int = 0,
-    suite: str = "corl2017",
-    fidelity: str | None = None,
-    max_decisions: int | None = None,
-    every: int = 1,
-    fps: float | None = None,
-    progress: bool = False,
-    **env_kwargs: Any,
-) -> dict:
-    """Run ``agent`` on one episode of ``env_id`` and write every ``every``-th rendered frame.
-
-    The env is made with ``render_mode="rgb_array"``; the frames it rendered at each
-    simulation step (``env.unwrapped.drain_frames()``) are collected after ``reset`` and
-    after every decision. The episode is reset with ``seed=episode_index``, like the
-    evaluation runner, so the record matches ``hbmp-bench run``.
-
-    Args:
-        env_id: a registered id (``hbmp_bench/Town01-Straight-v0``).
-        agent: agent registry name or ``module:Class``.
-        path: ``.gif`` (or ``.mp4`` with imageio-ffmpeg) to write.
-        episode_index: episode of the suite's list (for the training id: the reset seed).
-        suite, fidelity: env options (``fidelity=None``: the env's default).
-        max_decisions: stop after this many decisions (None: until the episode ends).
-        every: keep every ``every``-th frame (>= 1) to keep files small.
-        fps: playback rate; default real time (``1 / (step length * every)``).
-        progress: show a progress bar of decisions.
-        env_kwargs: further ``gymnasium.make`` options of the env.
-
-    Returns:
-        The episode record as a dict (``EpisodeRecord`` fields; the record so far when
-        ``max_decisions`` stopped the episode early), with ``agent`` filled in.
-    """
-    from tqdm import tqdm
-
-    from hbmp_bench.agents import load_agent
-    from hbmp_bench.envs import TRAINING_ID, make
-
-    path = check_video_path(path)
-    if int(every) != every or every < 1:
-        raise ValueError(f"every must be an int >= 1, got {every!r}")
-    if max_decisions is not None and (int(max_decisions) != max_decisions or max_decisions < 1):
-        raise ValueError(f"max_decisions must be an int >= 1 or None, got {max_decisions!r}")
-    if fps is not None and not (np.isfinite(fps) and fps > 0):
-        raise ValueError(f"fps must be finite and > 0, got {fps!r}")
-    policy = load_agent(agent)
-    kwargs = dict(env_kwargs, render_mode="rgb_array", suite=suite)
-    if env_id != TRAINING_ID:
-        kwargs["episode_index"] = episode_index
-    if fidelity is not None:
-        kwargs["fidelity"] = fidelity
-    env = make(env_id, **kwargs)
-    frames: list[Image.Image] = []
-    seen = 0
-
-    def collect() -> None:
-        nonlocal seen
-        for frame in env.unwrapped.drain_frames():
-            if seen % every == 0:
-                # palette images: a third of the memory of RGB; the GIF writer needs them anyway
-                image = Image.fromarray(np.asarray(frame, dtype=np.uint8))
-                frames.append(image.quantize(256, method=Image.Quantize.FASTOCTREE))
-            seen += 1
-
-    try:
-        obs, info = env.reset(seed=episode_index)
-        policy.reset(info)
-        collect()
-        step_s = float(env.unwrapped.config.step_length_s)
-        done, decisions = False, 0
-        with tqdm(total=max_decisions, unit="decision", disable=not progress) as bar:
-            while not done and (max_decisions is None or decisions < max_decisions):
-                obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
-                decisions += 1
-                bar.update(1)
-                collect()
-                done = terminated or truncated
-        record = dict(info["episode"]) if done else env.unwrapped.world.record().to_dict()
-    finally:
-        env.close()
-    if not frames:
-        raise RuntimeError(f"{env_id} rendered no frames; does it support render_mode='rgb_array'?")
-    record["agent"] = agent
-    write_video(frames, path, fps if fps is not None else 1.0 / (step_s * every))
-    return record

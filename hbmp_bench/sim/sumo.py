@@ -1,8 +1,17 @@
-"""The one place that talks to SUMO: a libsumo simulation and the world snapshot it yields.
+"""The one place that talks to SUMO: a simulation and the world snapshot it yields.
 
-libsumo runs one simulation per process, in-process (no socket). ``SumoSim`` starts on
-``start()``, never in ``__init__``; ``close()`` is idempotent. Vehicles and pedestrians are
-read each step through subscriptions (one batched call per kind, not one call per actor).
+Two ways to the same SUMO (the eclipse-sumo / libsumo wheels, same version, same API):
+
+- **libsumo** (fast): SUMO runs inside this process, every call is a C++ function call. libsumo
+  holds one simulation per process, so the first ``SumoSim`` started in a process takes it.
+- **TraCI** (slower: each call is a round trip over a local socket): a ``SumoSim`` started while
+  another one holds libsumo runs the wheel's ``sumo`` binary in a child process and talks to it
+  through the ``traci`` client. This is what lets several environments live in one process
+  (gymnasium's ``check_env``, ``make_vec`` sync, PettingZoo's seed test).
+
+Both give identical episodes. ``SumoSim`` starts on ``start()``, never in ``__init__``;
+``close()`` is idempotent. Vehicles and pedestrians are read each step through subscriptions (one
+batched call per kind, not one call per actor).
 
 Angles: SUMO reports degrees clockwise from north; everything leaving this module is
 ``yaw`` [rad] counter-clockwise from +x. SUMO's vehicle position is the front bumper; this
@@ -13,6 +22,9 @@ from __future__ import annotations
 
 import math
 import os
+import socket
+import subprocess
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,8 +33,12 @@ import numpy as np
 
 import libsumo
 import sumo
+import traci.connection
+import traci.exceptions
 
 tc = libsumo.constants
+_SUMO_ERRORS = (libsumo.TraCIException, traci.exceptions.TraCIException)
+"""What SUMO raises for a refused command, through libsumo or through TraCI."""
 
 _SUBSCRIBED = (tc.VAR_POSITION3D, tc.VAR_ANGLE, tc.VAR_SPEED)
 _EGO_SUBSCRIBED = (tc.VAR_POSITION3D, tc.VAR_ANGLE, tc.VAR_SPEED, tc.VAR_LANE_ID, tc.VAR_LANEPOSITION, tc.VAR_ROUTE_INDEX)
@@ -119,12 +135,47 @@ class VehicleState:
 
 @dataclass(frozen=True)
 class LightAhead:
-    """The next traffic light on a vehicle's route: its state char and distance to the stop line [m]."""
+    """A traffic light ahead on a vehicle's route: the link (``tls``, ``link_index``), the distance
+    from the front bumper to its stop line [m] and its signal char now (``r``, ``y``, ``G`` ...)."""
 
     tls: str
     link_index: int
     distance: float
     state: str
+
+
+TRACI_CONNECT_TIMEOUT_S = 60.0
+"""How long a TraCI ``sumo`` child may take to load its network and accept the connection [s]."""
+
+
+def _free_port() -> int:
+    with socket.socket() as probe:
+        probe.bind(("localhost", 0))
+        return int(probe.getsockname()[1])
+
+
+def start_traci(args: list[str]) -> traci.connection.Connection:
+    """Run ``args`` (the wheel's ``sumo`` and its options) in a child process and connect to it
+    over TraCI on a free local port. Raises RuntimeError with SUMO's own message when the child
+    exits before accepting (a port taken meanwhile is retried with another)."""
+    deadline = time.monotonic() + TRACI_CONNECT_TIMEOUT_S
+    while True:
+        port = _free_port()
+        log = tempfile.TemporaryFile()
+        proc = subprocess.Popen([*args, "--remote-port", str(port)], stdout=subprocess.DEVNULL, stderr=log)
+        while proc.poll() is None and time.monotonic() < deadline:
+            try:
+                return traci.connection.Connection("localhost", port, proc, None, True, None)
+            except OSError:
+                time.sleep(0.02)
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+            raise RuntimeError(f"sumo did not accept a TraCI connection within {TRACI_CONNECT_TIMEOUT_S} s")
+        log.seek(0)
+        message = log.read().decode(errors="replace").strip()
+        if "bind" not in message.lower() or time.monotonic() >= deadline:
+            raise RuntimeError(f"sumo exited with {proc.returncode} before accepting TraCI: {message}")
 
 
 def sumo_binary() -> str:
@@ -143,14 +194,15 @@ def yaw_to_sumo_angle(yaw: float) -> float:
 
 
 class SumoSim:
-    """One libsumo simulation.
+    """One SUMO simulation: through libsumo when this process's libsumo is free at ``start()``,
+    otherwise through TraCI (see the module docstring).
 
     Args:
         net_path: SUMO network file.
         step_length: simulation step [s].
     """
 
-    _active: "SumoSim | None" = None
+    _libsumo_holder: "SumoSim | None" = None
 
     def __init__(self, net_path: str | Path, step_length: float = 0.1):
         if step_length <= 0:
@@ -162,80 +214,99 @@ class SumoSim:
         self._controlled: dict[str, list[str]] | None = None
         self._programs: dict[str, tuple[tuple[float, str], ...]] = {}
         self._snapshot_dims: tuple | None = None
+        self._api = None
+        """``libsumo`` or a TraCI connection while running (both offer the same domains), else None."""
+        self._move_pending = False
 
     # --------------------------------------------------------------- lifecycle
     @property
     def running(self) -> bool:
-        return SumoSim._active is self
+        return self._api is not None
+
+    @property
+    def uses_libsumo(self) -> bool:
+        """Whether this simulation runs in this process through libsumo (False: TraCI, or not running)."""
+        return self._api is libsumo
 
     def start(self, seed: int) -> None:
-        """(Re)start the simulation with SUMO's ``--seed``; closes a previous run of this object."""
-        if SumoSim._active is not None and SumoSim._active is not self:
-            raise RuntimeError(
-                "libsumo runs one simulation per process and another SumoSim is running; "
-                "close it first or use one worker process per environment"
-            )
+        """(Re)start the simulation with SUMO's ``--seed``; closes a previous run of this object.
+        Through libsumo when no other simulation of this process holds it, through TraCI otherwise."""
         self.close()
-        libsumo.start(
-            [
-                sumo_binary(),
-                "-n", self.net_path,
-                "--step-length", str(self.step_length),
-                "--seed", str(int(seed)),
-                "--no-step-log", "true",
-                "--no-warnings", "true",
-                "--collision.action", "none",
-                "--time-to-teleport", "-1",
-                "--ignore-route-errors", "true",
-                "--pedestrian.model", "striping",
-                "--default.speeddev", "0.05",
-            ]
-        )
-        SumoSim._active = self
+        args = [
+            sumo_binary(),
+            "-n", self.net_path,
+            "--step-length", str(self.step_length),
+            "--seed", str(int(seed)),
+            "--no-step-log", "true",
+            "--no-warnings", "true",
+            "--collision.action", "none",
+            "--time-to-teleport", "-1",
+            "--ignore-route-errors", "true",
+            "--pedestrian.model", "striping",
+            "--default.speeddev", "0.05",
+        ]
+        if SumoSim._libsumo_holder is None:
+            libsumo.start(args)
+            SumoSim._libsumo_holder, self._api = self, libsumo
+        else:
+            self._api = start_traci(args)
+        self._move_pending = False
         self._controlled = None
         self._programs = {}
         self._dims = {}
         self._snapshot_dims = None
         self._routes = 0
+        types = self._api.vehicletype
         for vtype in (EGO_TYPE, BACKGROUND_TYPE):
-            libsumo.vehicletype.copy("DEFAULT_VEHTYPE", vtype.id)
-            libsumo.vehicletype.setLength(vtype.id, vtype.length)
-            libsumo.vehicletype.setWidth(vtype.id, vtype.width)
-            libsumo.vehicletype.setAccel(vtype.id, vtype.accel)
-            libsumo.vehicletype.setDecel(vtype.id, vtype.decel)
-            libsumo.vehicletype.setEmergencyDecel(vtype.id, vtype.emergency_decel)
-            libsumo.vehicletype.setMinGap(vtype.id, vtype.min_gap)
-            libsumo.vehicletype.setMaxSpeed(vtype.id, vtype.max_speed)
+            types.copy("DEFAULT_VEHTYPE", vtype.id)
+            types.setLength(vtype.id, vtype.length)
+            types.setWidth(vtype.id, vtype.width)
+            types.setAccel(vtype.id, vtype.accel)
+            types.setDecel(vtype.id, vtype.decel)
+            types.setEmergencyDecel(vtype.id, vtype.emergency_decel)
+            types.setMinGap(vtype.id, vtype.min_gap)
+            types.setMaxSpeed(vtype.id, vtype.max_speed)
 
     def close(self) -> None:
-        """End the simulation; safe to call any number of times."""
-        if SumoSim._active is self:
-            try:
-                libsumo.close()
-            finally:
-                SumoSim._active = None
+        """End the simulation; safe to call any number of times.
+
+        A pose pushed with ``moveToXY`` and not stepped yet stays registered in libsumo's
+        process-wide state past ``close`` and crashes the next simulation's first step
+        (segmentation fault in ``simulationStep``); one last step consumes it first."""
+        api, self._api = self._api, None
+        if api is None:
+            return
+        try:
+            if api is libsumo and self._move_pending:
+                libsumo.simulationStep()
+            api.close()
+        finally:
+            self._move_pending = False
+            if SumoSim._libsumo_holder is self:
+                SumoSim._libsumo_holder = None
 
     @property
     def time(self) -> float:
         """Simulation time [s]."""
-        return float(libsumo.simulation.getTime())
+        return float(self._api.simulation.getTime())
 
     def step(self) -> None:
         """Advance one step of ``step_length``."""
-        libsumo.simulationStep()
+        self._api.simulationStep()
+        self._move_pending = False
 
     def time_raw_steps(self, steps: int) -> float:
         """Wall time [s] of ``steps`` bare ``libsumo.simulationStep()`` calls, after dropping every
         subscription and giving all handed-over vehicles back to SUMO's own driver (throughput
         reference: SUMO alone, no package code per step). The scene is unusable for an episode after."""
-        for vehicle_id in libsumo.vehicle.getIDList():
-            libsumo.vehicle.unsubscribe(vehicle_id)
-            libsumo.vehicle.setSpeed(vehicle_id, -1.0)
-            libsumo.vehicle.setSpeedMode(vehicle_id, 31)
-            libsumo.vehicle.setLaneChangeMode(vehicle_id, 1621)
-        for person_id in libsumo.person.getIDList():
-            libsumo.person.unsubscribe(person_id)
-        simulation_step = libsumo.simulationStep
+        for vehicle_id in self._api.vehicle.getIDList():
+            self._api.vehicle.unsubscribe(vehicle_id)
+            self._api.vehicle.setSpeed(vehicle_id, -1.0)
+            self._api.vehicle.setSpeedMode(vehicle_id, 31)
+            self._api.vehicle.setLaneChangeMode(vehicle_id, 1621)
+        for person_id in self._api.person.getIDList():
+            self._api.person.unsubscribe(person_id)
+        simulation_step = self._api.simulationStep
         start = time.perf_counter()
         for _ in range(int(steps)):
             simulation_step()
@@ -255,8 +326,8 @@ class SumoSim:
         """Insert a vehicle on ``route`` now (SUMO lane index, position [m], speed [m/s])."""
         route_id = f"r{self._routes}"
         self._routes += 1
-        libsumo.route.add(route_id, list(route))
-        libsumo.vehicle.add(
+        self._api.route.add(route_id, list(route))
+        self._api.vehicle.add(
             vehicle_id,
             route_id,
             typeID=vtype.id,
@@ -266,36 +337,38 @@ class SumoSim:
             departSpeed=str(speed),
         )
         self._dims[vehicle_id] = (vtype.length, vtype.width, False)
-        libsumo.vehicle.subscribe(vehicle_id, _EGO_SUBSCRIBED if vtype is EGO_TYPE else _SUBSCRIBED)
+        self._api.vehicle.subscribe(vehicle_id, _EGO_SUBSCRIBED if vtype is EGO_TYPE else _SUBSCRIBED)
 
     def add_pedestrian(self, person_id: str, edge: str, pos: float, walks: list[tuple[str, str]]) -> None:
         """Insert a pedestrian at ``pos`` [m] on ``edge`` walking to each (from, to) edge pair in turn."""
-        libsumo.person.add(person_id, edge, pos, depart=tc.DEPARTFLAG_NOW)
+        self._api.person.add(person_id, edge, pos, depart=tc.DEPARTFLAG_NOW)
         for from_edge, to_edge in walks:
-            for stage in libsumo.simulation.findIntermodalRoute(from_edge, to_edge, modes=""):
-                libsumo.person.appendStage(person_id, stage)
-        libsumo.person.subscribe(person_id, _SUBSCRIBED)
+            for stage in self._api.simulation.findIntermodalRoute(from_edge, to_edge, modes=""):
+                self._api.person.appendStage(person_id, stage)
+        self._api.person.subscribe(person_id, _SUBSCRIBED)
         self._dims[person_id] = (PEDESTRIAN_SIZE_M, PEDESTRIAN_SIZE_M, True)
 
     def walk_route_exists(self, from_edge: str, to_edge: str) -> bool:
         """True if a pedestrian can walk from ``from_edge`` to ``to_edge``."""
-        stages = libsumo.simulation.findIntermodalRoute(from_edge, to_edge, modes="")
+        stages = self._api.simulation.findIntermodalRoute(from_edge, to_edge, modes="")
         return bool(stages) and bool(stages[0].edges)
 
     def vehicle_ids(self) -> tuple[str, ...]:
-        return tuple(libsumo.vehicle.getIDList())
+        return tuple(self._api.vehicle.getIDList())
 
     def arrived_ids(self) -> tuple[str, ...]:
         """Vehicles that reached the end of their route in the last step."""
-        return tuple(libsumo.simulation.getArrivedIDList())
+        return tuple(self._api.simulation.getArrivedIDList())
 
     def snapshot(self) -> Actors:
         """All inserted vehicles and pedestrians now (footprint centres)."""
         pos_, angle_, speed_ = tc.VAR_POSITION3D, tc.VAR_ANGLE, tc.VAR_SPEED
-        # a vehicle still waiting for its insertion has no valid 3D position (an invalid 2D one): not on the road
-        results = {i: r for group in (libsumo.vehicle.getAllSubscriptionResults(),
-                                      libsumo.person.getAllSubscriptionResults())
-                   for i, r in group.items() if len(r.get(pos_, ())) == 3}
+        # a vehicle still waiting for its insertion has no valid 3D position (an invalid 2D one): not on the
+        # road. Vehicles then persons, each sorted by id as libsumo gives them (TraCI keeps insertion order):
+        # the same order on both paths, so sums over actors are the same to the last bit
+        results = {i: group[i] for group in (self._api.vehicle.getAllSubscriptionResults(),
+                                             self._api.person.getAllSubscriptionResults())
+                   for i in sorted(group) if len(group[i].get(pos_, ())) == 3}
         ids = tuple(results)
         k = len(ids)
         rows = np.array([(*r[pos_], r[angle_], r[speed_]) for r in results.values()], dtype=float).reshape(k, 5)
@@ -316,7 +389,7 @@ class SumoSim:
 
     def vehicle_state(self, vehicle_id: str) -> VehicleState | None:
         """Pose and lane of a subscribed vehicle with lane variables (the ego), None if absent."""
-        r = libsumo.vehicle.getSubscriptionResults(vehicle_id)
+        r = self._api.vehicle.getSubscriptionResults(vehicle_id)
         if not r:
             return None
         length = self._dims[vehicle_id][0]
@@ -333,7 +406,7 @@ class SumoSim:
 
     def light_ahead(self, vehicle_id: str) -> LightAhead | None:
         """The next traffic light on the vehicle's route, or None."""
-        lights = libsumo.vehicle.getNextTLS(vehicle_id)
+        lights = self._api.vehicle.getNextTLS(vehicle_id)
         if not lights:
             return None
         tls, link_index, distance, state = lights[0]
@@ -341,7 +414,7 @@ class SumoSim:
 
     def light_state(self, tls: str, link_index: int) -> str:
         """Current signal char (``r``, ``y``, ``g``, ``G`` ...) of one link of a traffic light."""
-        return libsumo.trafficlight.getRedYellowGreenState(tls)[link_index]
+        return self._api.trafficlight.getRedYellowGreenState(tls)[link_index]
 
     def signal_schedule(self, tls: str, link_index: int, horizon_s: float = 60.0) -> tuple[tuple[float, str], ...]:
         """The signal of one link now and at each change within ``horizon_s`` [s]: ((0, char now),
@@ -350,14 +423,14 @@ class SumoSim:
         durations after it)."""
         phases = self._programs.get(tls)
         if phases is None:
-            program = libsumo.trafficlight.getProgram(tls)
-            logic = next(lg for lg in libsumo.trafficlight.getAllProgramLogics(tls) if lg.programID == program)
+            program = self._api.trafficlight.getProgram(tls)
+            logic = next(lg for lg in self._api.trafficlight.getAllProgramLogics(tls) if lg.programID == program)
             phases = self._programs[tls] = tuple((float(p.duration), p.state) for p in logic.phases)
-        phase = libsumo.trafficlight.getPhase(tls)
-        now = libsumo.simulation.getTime()
-        char = libsumo.trafficlight.getRedYellowGreenState(tls)[link_index]
+        phase = self._api.trafficlight.getPhase(tls)
+        now = self._api.simulation.getTime()
+        char = self._api.trafficlight.getRedYellowGreenState(tls)[link_index]
         out = [(0.0, char)]
-        t = max(libsumo.trafficlight.getNextSwitch(tls) - now, 1e-3)  # a switch due now: just after now
+        t = max(self._api.trafficlight.getNextSwitch(tls) - now, 1e-3)  # a switch due now: just after now
         for k in range(1, 4 * len(phases) + 1):
             if t > horizon_s:
                 break
@@ -374,56 +447,56 @@ class SumoSim:
         out = []
         offset = 0.0
         for lane in junction_lanes:
-            for vid in libsumo.lane.getLastStepVehicleIDs(lane):
-                out.append((vid, -(offset + libsumo.vehicle.getLanePosition(vid)), libsumo.vehicle.getSpeed(vid)))
-            offset += libsumo.lane.getLength(lane)
-        length = libsumo.lane.getLength(from_lane)
-        for vid in libsumo.lane.getLastStepVehicleIDs(from_lane):
-            dist = length - libsumo.vehicle.getLanePosition(vid)
-            links = libsumo.vehicle.getNextLinks(vid) if dist <= horizon_m else ()
+            for vid in self._api.lane.getLastStepVehicleIDs(lane):
+                out.append((vid, -(offset + self._api.vehicle.getLanePosition(vid)), self._api.vehicle.getSpeed(vid)))
+            offset += self._api.lane.getLength(lane)
+        length = self._api.lane.getLength(from_lane)
+        for vid in self._api.lane.getLastStepVehicleIDs(from_lane):
+            dist = length - self._api.vehicle.getLanePosition(vid)
+            links = self._api.vehicle.getNextLinks(vid) if dist <= horizon_m else ()
             if links and links[0][4] == junction_lanes[0]:
-                out.append((vid, dist, libsumo.vehicle.getSpeed(vid)))
+                out.append((vid, dist, self._api.vehicle.getSpeed(vid)))
         return tuple(out)
 
     def crossing_waiters(self, crossing: str, walkingareas: tuple[str, ...]) -> tuple[str, ...]:
         """The pedestrians on the walking areas at a crossing's ends whose next edge is the crossing."""
-        return tuple(pid for area in walkingareas for pid in libsumo.edge.getLastStepPersonIDs(area)
-                     if libsumo.person.getNextEdge(pid) == crossing)
+        return tuple(pid for area in walkingareas for pid in self._api.edge.getLastStepPersonIDs(area)
+                     if self._api.person.getNextEdge(pid) == crossing)
 
     # ---------------------------------------------------------------- commands
     def track_lane(self, vehicle_id: str) -> None:
         """Subscribe a vehicle to its lane variables too, so :meth:`vehicle_state` works for it
         (done for the ego on insertion; a background vehicle driven by an agent needs it)."""
-        libsumo.vehicle.subscribe(vehicle_id, _EGO_SUBSCRIBED)
+        self._api.vehicle.subscribe(vehicle_id, _EGO_SUBSCRIBED)
 
     def remove_vehicle(self, vehicle_id: str) -> None:
         """Take a vehicle out of the simulation (no-op if it is already gone)."""
         try:
-            libsumo.vehicle.unsubscribe(vehicle_id)  # a subscription of a removed vehicle breaks the next step
-            libsumo.vehicle.remove(vehicle_id)
-        except libsumo.TraCIException:
+            self._api.vehicle.unsubscribe(vehicle_id)  # a subscription of a removed vehicle breaks the next step
+            self._api.vehicle.remove(vehicle_id)
+        except _SUMO_ERRORS:
             pass
 
     def hand_over(self, vehicle_id: str) -> None:
         """Give a vehicle's driving to the caller: no SUMO lane changes, no safe-speed or red-light
         braking (only its acceleration limits), so the agent can and must avoid infractions."""
-        libsumo.vehicle.setLaneChangeMode(vehicle_id, 0)
-        libsumo.vehicle.setSpeedMode(vehicle_id, 0b000110)
+        self._api.vehicle.setLaneChangeMode(vehicle_id, 0)
+        self._api.vehicle.setSpeedMode(vehicle_id, 0b000110)
 
     def set_speed(self, vehicle_id: str, speed: float) -> None:
         """Target speed [m/s], reached within the vehicle type's acceleration limits."""
-        libsumo.vehicle.setSpeed(vehicle_id, max(0.0, float(speed)))
+        self._api.vehicle.setSpeed(vehicle_id, max(0.0, float(speed)))
 
     def change_lane(self, vehicle_id: str, lane_index: int) -> None:
         """Move to SUMO lane ``lane_index`` of the current edge in the next step."""
-        libsumo.vehicle.changeLane(vehicle_id, int(lane_index), self.step_length)
+        self._api.vehicle.changeLane(vehicle_id, int(lane_index), self.step_length)
 
     def set_route(self, vehicle_id: str, route: tuple[str, ...] | list[str]) -> bool:
         """Replace a vehicle's route (must start with its current edge); False if SUMO refuses
         (e.g. the vehicle is inside a junction on a connection the route does not take)."""
         try:
-            libsumo.vehicle.setRoute(vehicle_id, list(route))
-        except libsumo.TraCIException:
+            self._api.vehicle.setRoute(vehicle_id, list(route))
+        except _SUMO_ERRORS:
             return False
         return True
 
@@ -440,9 +513,10 @@ class SumoSim:
         length = self._dims[vehicle_id][0]
         front = np.asarray(xy, dtype=float) + length / 2 * np.array([math.cos(yaw), math.sin(yaw)])
         try:
-            libsumo.vehicle.moveToXY(vehicle_id, edge, int(lane_index), float(front[0]), float(front[1]),
-                                     yaw_to_sumo_angle(yaw), 1 if on_route else 2)
-        except libsumo.TraCIException:
+            self._api.vehicle.moveToXY(vehicle_id, edge, int(lane_index), float(front[0]), float(front[1]),
+                                       yaw_to_sumo_angle(yaw), 1 if on_route else 2)
+            self._move_pending = True
+        except _SUMO_ERRORS:
             return False
         return True
 
@@ -453,13 +527,13 @@ class SumoSim:
         """
         if self._controlled is None:
             self._controlled = {
-                tls: [links[0][0] if links else "" for links in libsumo.trafficlight.getControlledLinks(tls)]
-                for tls in libsumo.trafficlight.getIDList()
+                tls: [links[0][0] if links else "" for links in self._api.trafficlight.getControlledLinks(tls)]
+                for tls in self._api.trafficlight.getIDList()
             }
         out: dict[str, str] = {}
         rank = {"G": 4, "g": 3, "y": 2, "Y": 2, "r": 1, "R": 1}
         for tls, lanes in self._controlled.items():
-            state = libsumo.trafficlight.getRedYellowGreenState(tls)
+            state = self._api.trafficlight.getRedYellowGreenState(tls)
             for lane, char in zip(lanes, state):
                 if lane and rank.get(char, 0) >= rank.get(out.get(lane, ""), 0):
                     out[lane] = char

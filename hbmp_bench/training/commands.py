@@ -141,8 +141,8 @@ def add_commands(subparsers) -> None:
     """Add ``train`` and ``curves`` to the ``hbmp-bench`` parser."""
     p = subparsers.add_parser("train", help="train il (DAgger), hbmp, hbmp-s or flat (PPO, rsl-rl)",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("kind", choices=KINDS)
-    p.add_argument("--scenario", default="hbmp_bench/Training-v0", help="env id (default: Town03, random goals)")
+    p.add_argument("kind", choices=KINDS, help="what to train: " + ", ".join(KINDS))
+    p.add_argument("--scenario", default="hbmp_bench/Training-v0", help="env id; hbmp_bench/Training-v0 is Town03 with a random start and goal every reset")
     p.add_argument("--episodes", type=int, default=None,
                    help="episode budget (default: il 3000, others 6000 as in the paper)")
     p.add_argument("--workers", type=int, default=2, help="environment processes (one SUMO each)")
@@ -150,7 +150,7 @@ def add_commands(subparsers) -> None:
                    help="where the environment workers run: local processes (default) or Ray actors")
     p.add_argument("--address", default=None,
                    help="with --backend ray: the cluster (ray://HEAD:10001 or auto); default: a local Ray instance")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0, help="seed of the run (episodes, weights, sampling)")
     p.add_argument("--out", default=None, help="run folder (default: runs/<kind>__<scenario>__<seed>__<time>)")
     p.add_argument("--init", default=None,
                    help="hbmp/hbmp-s actor initialisation: 'il' (shipped, default), a .pt checkpoint, or 'none'")
@@ -168,7 +168,7 @@ def add_commands(subparsers) -> None:
 
     p = subparsers.add_parser("curves", help="one PNG of r_T and r_T + Σr_t per episode for several training runs")
     p.add_argument("runs", nargs="+", help="run folders (each with episodes.csv)")
-    p.add_argument("--labels", nargs="*", default=None)
-    p.add_argument("--out", default="training_curves.png")
+    p.add_argument("--labels", nargs="*", default=None, help="one legend label per run (default: the folder names)")
+    p.add_argument("--out", default="training_curves.png", help="PNG to write")
     p.add_argument("--window", type=int, default=50, help="moving-average window [episodes]")
     p.set_defaults(func=_cmd_curves)

@@ -15,7 +15,6 @@ Protocol (parent → worker, worker → parent):
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import traceback
 from dataclasses import dataclass
 from typing import Any
@@ -42,7 +41,9 @@ class WorkerEnvConfig:
         entry_point: ``module:Class`` built instead of the id's own class, with the id's registered
             options plus ``env_kwargs`` (the flat baseline's control env); None: the id's class.
         reward: one of :data:`REWARD_MODES`.
-        expert_labels: also report the rule-based expert's behavior for every observation (DAgger).
+        expert_labels: also report the rule-based expert's behavior for every observation (DAgger);
+            the env is then made with the options the expert asks for (``privileged=True``: its
+            info, never the learner's observation, holds the privileged scene).
         reward_scale: factor on the training reward (the CSV log keeps r_T and r_k unscaled).
     """
 
@@ -79,11 +80,9 @@ def make_env(config: WorkerEnvConfig):
 
     if config.env_id not in env_ids():
         raise UnknownNameError("env id", config.env_id, env_ids())
-    module_name, _, attr = config.entry_point.partition(":")
-    try:
-        factory = getattr(importlib.import_module(module_name), attr)
-    except (ImportError, AttributeError) as exc:
-        raise ValueError(f"cannot load environment class {config.entry_point!r}: {exc}") from exc
+    from hbmp_bench.plugins import resolve
+
+    factory = resolve(config.entry_point, "environment class")
     return factory(**{**gym.spec(config.env_id).kwargs, **config.kwargs})
 
 
@@ -155,13 +154,14 @@ class EnvRunner:
     """The worker's state: its environment, the expert (for labels) and the running episode."""
 
     def __init__(self, config: WorkerEnvConfig):
-        self.config = config
-        self.env = make_env(config)
         self.expert = None
         if config.expert_labels:
-            from hbmp_bench.agents import load_agent
+            from hbmp_bench.agents import agent_env_kwargs, load_agent
 
             self.expert = load_agent("expert")
+            config = dataclasses.replace(config, env_kwargs={**agent_env_kwargs(self.expert), **config.kwargs})
+        self.config = config
+        self.env = make_env(config)
         self.tally = EpisodeTally()
 
     def _reply(self, obs: dict, info: dict, new_episode: bool, **fields) -> StepReply:

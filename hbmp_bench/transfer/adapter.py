@@ -25,10 +25,17 @@ network (``lane.position``) along the ego's planned route. R_t has the SUMO sema
 from __future__ import annotations
 
 import numpy as np
-from highway_env.road.lane import SineLane, StraightLane
+
+try:
+    from highway_env.road.lane import SineLane, StraightLane
+except ModuleNotFoundError as exc:
+    if (exc.name or "").partition(".")[0] != "highway_env":
+        raise
+    raise ModuleNotFoundError("the highway-env transfer envs need highway-env, an optional extra: "
+                              "pip install 'hbmp-bench[highway-env]'", name=exc.name) from exc
 
 from hbmp_bench.envs.observation import ROAD_FEATURES, ObservationConfig, occupancy_grid
-from hbmp_bench.envs.world import BEHAVIORS, CHANGE_LEFT, CHANGE_RIGHT
+from hbmp_bench.planning.behaviors import BEHAVIORS, Behavior
 from hbmp_bench.planning.frame import Path
 from hbmp_bench.transfer.scenes import TransferScene
 
@@ -67,7 +74,7 @@ def mirror(xy: np.ndarray) -> np.ndarray:
 
 
 class HighwayAdapter:
-    """M_t, R_t, the privileged ``scene`` dict and the action mask for the ego of one highway-env
+    """M_t, R_t, the ``scene`` dict and the action mask for the ego of one highway-env
     episode. Build a new one for every episode (highway-env rebuilds its road on reset).
 
     Args:
@@ -182,14 +189,15 @@ class HighwayAdapter:
         """(5,) int8: 1 where a behavior is feasible for R_t (lane changes need the target lane)."""
         mask = np.ones(len(BEHAVIORS), dtype=np.int8)
         if self.in_junction(ego.lane_index):
-            mask[CHANGE_LEFT] = mask[CHANGE_RIGHT] = 0
+            mask[Behavior.CHANGE_LEFT] = mask[Behavior.CHANGE_RIGHT] = 0
         else:
             left, right = self.neighbours(ego)
-            mask[CHANGE_LEFT], mask[CHANGE_RIGHT] = left is not None, right is not None
+            mask[Behavior.CHANGE_LEFT], mask[Behavior.CHANGE_RIGHT] = left is not None, right is not None
         return mask
 
     def road_profile(self, ego) -> tuple[np.ndarray, dict]:
-        """R_t (10,) float32 and the privileged ``scene`` dict (metres, m/s) the expert reads."""
+        """R_t (10,) float32 and the ``scene`` dict (metres, m/s): R_t's quantities and the goal
+        distance, the non-privileged fields of :class:`~hbmp_bench.envs.scene.Scene`."""
         r = np.zeros(len(ROAD_FEATURES), dtype=np.float32)
         index = ego.lane_index
         lane = self.network.get_lane(index)

@@ -34,7 +34,7 @@ def add_commands(subparsers) -> None:
     q.set_defaults(func=_cmd_evaluate)
 
     q = sub.add_parser("report", help="the transfer tables of the records in a directory")
-    q.add_argument("directory")
+    q.add_argument("directory", help="folder of transfer evaluate's records")
     q.add_argument("--markdown", default=None,
                    help=f"write the tables here; an existing file keeps everything outside {TABLE_BEGIN} ... {TABLE_END}")
     q.set_defaults(func=_cmd_report)

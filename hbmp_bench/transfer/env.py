@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -12,9 +11,11 @@ from gymnasium import spaces
 
 from hbmp_bench import __version__
 from hbmp_bench.envs.observation import ObservationConfig, observation_space
-from hbmp_bench.envs.world import BEHAVIORS, CHANGE_LEFT, CHANGE_RIGHT, KEEP, TERMINAL_REWARD
 from hbmp_bench.metrics.detectors import EVENT_KINDS
-from hbmp_bench.metrics.records import EpisodeRecord, driving_score
+from hbmp_bench.metrics.episode import EpisodeId, EpisodeScorer, terminal_reward
+from hbmp_bench.metrics.records import EpisodeRecord
+from hbmp_bench.planning.behaviors import BEHAVIORS, Behavior
+from hbmp_bench.plugins import resolve
 from hbmp_bench.transfer.adapter import HighwayAdapter, to_meta_action
 from hbmp_bench.transfer.scenes import TransferScene, get_scene
 
@@ -62,11 +63,6 @@ class TransferConfig:
 def _no_events() -> dict[str, int]:
     """Event counts by kind: the SUMO kinds (``EVENT_KINDS``) plus ``collision_other`` (obstacles)."""
     return {k: 0 for k in (*EVENT_KINDS, "collision_other")}
-
-
-def _load_class(path: str):
-    module, _, name = path.partition(":")
-    return getattr(importlib.import_module(module), name)
 
 
 def _vehicle_classes() -> tuple[type, ...]:
@@ -176,7 +172,7 @@ class HighwayTransferEnv(gym.Env):
     def highway_env(self):
         """The wrapped highway-env environment (created on first use)."""
         if self._hw is None:
-            cls = _load_class(self.scene.env_class)
+            cls = resolve(self.scene.env_class, "highway-env class")
             config = self.scene.highway_config(self.config.decision_hz, self.config.speed_step_mps)
             self._hw = cls(config=config, render_mode=self.render_mode)
         return self._hw
@@ -198,8 +194,6 @@ class HighwayTransferEnv(gym.Env):
         ego = self.ego
         self._steps = 0
         self._decisions = 0
-        self._distance_m = 0.0
-        self._last_xy = np.array(ego.position, dtype=float)
         self._totals = _no_events()
         self._crashed = bool(ego.crashed)
         self._on_road = bool(ego.on_road)
@@ -221,11 +215,11 @@ class HighwayTransferEnv(gym.Env):
     # ----------------------------------------------------------- progress
     def _init_progress(self, ego) -> None:
         """Offsets [m] of the roads on the nominal route from the start to the goal road."""
-        self._progress_m = 0.0
         self._offsets: dict[tuple[str, str], float] = {}
         self.route_length_m = 0.0
         goal = self.scene.goal_road
         if goal is None:
+            self.score = EpisodeScorer(0.0, np.array(ego.position, dtype=float))
             return
         index = ego.lane_index
         s0 = float(self.adapter.network.get_lane(index).local_coordinates(ego.position)[0])
@@ -239,14 +233,13 @@ class HighwayTransferEnv(gym.Env):
             if index is None:
                 break
         self.route_length_m = max(self._offsets.get(tuple(goal), 0.0) + self.scene.goal_s_m, 0.0)
+        self.score = EpisodeScorer(self.route_length_m, np.array(ego.position, dtype=float))
 
     def _update_progress(self, ego) -> None:
         offset = self._offsets.get(tuple(ego.lane_index[:2]))
         if offset is None or self.route_length_m <= 0:
             return
-        progress = offset + float(ego.lane.local_coordinates(ego.position)[0])
-        if progress <= self.route_length_m + 5.0:
-            self._progress_m = max(self._progress_m, min(progress, self.route_length_m))
+        self.score.progressed_to(offset + float(ego.lane.local_coordinates(ego.position)[0]))
 
     @property
     def route_completion(self) -> float:
@@ -255,7 +248,7 @@ class HighwayTransferEnv(gym.Env):
             return 1.0
         if self.scene.goal_road is None:
             return float(np.clip(self.time_s / self.scene.duration_s, 0.0, 1.0))
-        return float(np.clip(self._progress_m / max(self.route_length_m, 1e-6), 0.0, 1.0))
+        return self.score.completion(False)
 
     @property
     def time_s(self) -> float:
@@ -270,13 +263,13 @@ class HighwayTransferEnv(gym.Env):
         if not is_int or not 0 <= int(action) < len(BEHAVIORS):
             raise ValueError(f"action must be an int in [0, {len(BEHAVIORS)}) ({', '.join(BEHAVIORS)}), got {action!r}")
         behavior = int(action)
-        executed = behavior if self._mask[behavior] else KEEP
+        executed = behavior if self._mask[behavior] else Behavior.KEEP
         events = _no_events()
         start = self.time_s
         target_before = self.ego.target_lane_index
         self._advance(to_meta_action(executed), events)
-        if executed in (CHANGE_LEFT, CHANGE_RIGHT) and self.ego.target_lane_index != target_before:
-            idle = to_meta_action(KEEP)
+        if executed in (Behavior.CHANGE_LEFT, Behavior.CHANGE_RIGHT) and self.ego.target_lane_index != target_before:
+            idle = to_meta_action(Behavior.KEEP)
             while not self._done_reason and not self._settled() and self.time_s - start < self.config.lane_change_max_s - 1e-9:
                 self._advance(idle, events)
         self._decisions += 1
@@ -306,9 +299,7 @@ class HighwayTransferEnv(gym.Env):
         self.highway_env.step(meta_action)
         self._steps += 1
         ego = self.ego
-        xy = np.array(ego.position, dtype=float)
-        self._distance_m += float(np.hypot(*(xy - self._last_xy)))
-        self._last_xy = xy
+        self.score.moved_to(np.array(ego.position, dtype=float))
         self._update_progress(ego)
         if ego.crashed and not self._crashed:
             self._crashed = True
@@ -345,13 +336,9 @@ class HighwayTransferEnv(gym.Env):
         return nearest not in self.highway_env.road.vehicles
 
     def _terminal_reward(self, events: dict[str, int]) -> float:
-        r = TERMINAL_REWARD
-        return float(
-            r["goal"] * (self._done_reason in ("goal", "survived"))
-            + r["collision"] * (events["collision_vehicle"] + events["collision_other"])
-            + r["timeout"] * (self._done_reason == "timeout")
-            + r["off_road"] * events["off_road"]
-        )
+        return terminal_reward(goal=self._done_reason in ("goal", "survived"),
+                               collisions=events["collision_vehicle"] + events["collision_other"],
+                               timed_out=self._done_reason == "timeout", off_road=events["off_road"])
 
     # -------------------------------------------------------------- observe
     def _observe(self, events: dict[str, int]) -> tuple[dict, dict]:
@@ -370,17 +357,8 @@ class HighwayTransferEnv(gym.Env):
 
     def record(self, agent: str = "") -> EpisodeRecord:
         """The episode record so far (final once the episode has ended)."""
-        totals = dict(self._totals)
-        completion = self.route_completion
-        return EpisodeRecord(
-            suite=SUITE, town=self.scene.name, task=self.scene.name, episode=self._episode_index, seed=self._seed,
-            agent=agent, package_version=__version__, fidelity=f"highway-env:{self.config.observation.kind}",
-            success=self._done_reason in ("goal", "survived"),
-            route_completion=round(completion, 4),
-            collision_vehicle=totals["collision_vehicle"], collision_pedestrian=0, collision_other=totals["collision_other"],
-            wrong_lane=0, off_road=totals["off_road"], red_light=0, timeout=self._done_reason == "timeout",
-            duration_s=round(self.time_s, 2), distance_m=round(self._distance_m, 2),
-            route_length_m=round(self.route_length_m, 2), decisions=self._decisions,
-            driving_score=round(driving_score(completion, totals), 3),
-            end_reason=self._done_reason or "running",
-        )
+        episode = EpisodeId(SUITE, self.scene.name, self.scene.name, self._episode_index, self._seed,
+                            f"highway-env:{self.config.observation.kind}", round(self.route_length_m, 2))
+        return self.score.record(episode, agent=agent, package_version=__version__, totals=dict(self._totals),
+                                 success=self._done_reason in ("goal", "survived"), end_reason=self._done_reason,
+                                 duration_s=self.time_s, decisions=self._decisions, completion=self.route_completion)

@@ -22,6 +22,7 @@ import pandas as pd
 from hbmp_bench.agents import load_agent
 from hbmp_bench.envs.observation import ObservationConfig
 from hbmp_bench.metrics.records import AGENT_ERROR, EpisodeRecord, latest_per_key, read_records
+from hbmp_bench.rollout import AgentFailed, EnvFailed, run_episode
 from hbmp_bench.transfer.env import HighwayTransferEnv
 from hbmp_bench.transfer.scenes import SCENES, get_scene
 
@@ -49,18 +50,15 @@ def run_transfer_episodes(agent: str, scene: str, episodes: int, observation: st
 
     try:
         for index in tqdm(range(episodes), desc=f"{agent} {scene} {observation}", unit="ep", disable=not progress):
-            obs, info = env.reset(seed=index, options={"episode_index": index})
             try:
-                policy.reset(info)
-                while True:
-                    obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
-                    if terminated or truncated:
-                        break
-                record = EpisodeRecord(**info["episode"])
-            except ValueError as exc:
-                record = dataclasses.replace(env.record(), success=False, end_reason=AGENT_ERROR, error=f"invalid action: {exc}")
-            except Exception as exc:  # noqa: BLE001  (a plug-in agent's failure is its episode's result)
-                record = dataclasses.replace(env.record(), success=False, end_reason=AGENT_ERROR, error=repr(exc))
+                record = EpisodeRecord(**run_episode(env, policy, seed=index, options={"episode_index": index}).record(env))
+            except EnvFailed as exc:
+                if exc.phase == "reset":
+                    raise exc.__cause__ from None
+                error = f"invalid action: {exc.__cause__}" if isinstance(exc.__cause__, ValueError) else repr(exc.__cause__)
+                record = dataclasses.replace(env.record(), success=False, end_reason=AGENT_ERROR, error=error)
+            except AgentFailed as exc:  # a plug-in agent's failure is its episode's result
+                record = dataclasses.replace(env.record(), success=False, end_reason=AGENT_ERROR, error=repr(exc.__cause__))
             records.append(dataclasses.replace(record, agent=agent))
     finally:
         env.close()

@@ -7,6 +7,7 @@ The crafted situations are ``(observation, info)`` pairs as the world builds the
 import numpy as np
 import pytest
 
+from hbmp_bench.agents import agent_env_kwargs
 from hbmp_bench.agents.expert import CHANGE_LEFT, CHANGE_RIGHT, KEEP, SPEED_DOWN, SPEED_UP, ExpertAgent, Timing
 from hbmp_bench.envs.observation import ObservationConfig
 
@@ -283,7 +284,7 @@ def test_the_planned_stop_is_longer_than_the_measured_speed_down_chain(fidelity)
     """The expert plans stops with ``Timing.stop_decel``: no shorter than a chain of speed_down
     really stops (measured in SUMO from the speed limit)."""
     from hbmp_bench.envs.stopping import measure_stop
-    from hbmp_bench.envs.world import WorldConfig
+    from hbmp_bench.envs.config import WorldConfig
 
     trace = measure_stop(WorldConfig(fidelity=fidelity), town="Town01")
     timing = Timing.for_period(1.0 if fidelity == "continuous" else 0.1, fidelity == "continuous")
@@ -302,8 +303,8 @@ def test_the_planned_stop_is_longer_than_the_measured_speed_down_chain(fidelity)
 def test_the_expert_drives_real_episodes_lawfully(town, task, episode, fidelity):
     from hbmp_bench.envs import BehaviorEnv
 
-    env = BehaviorEnv(town=town, task=task, suite="hbmp", fidelity=fidelity)
     agent = ExpertAgent()
+    env = BehaviorEnv(town=town, task=task, suite="hbmp", fidelity=fidelity, **agent_env_kwargs(agent))
     try:
         obs, info = env.reset(seed=episode, options={"episode_index": episode})
         agent.reset(info)

@@ -4,7 +4,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import hbmp_bench  # noqa: F401  (registers the ids)
-from hbmp_bench.agents import load_agent
+from hbmp_bench.agents import agent_env_kwargs, load_agent
 from hbmp_bench.envs import env_ids, make
 from hbmp_bench.errors import UnknownNameError
 
@@ -12,8 +12,10 @@ from hbmp_bench.errors import UnknownNameError
 @pytest.mark.slow
 @pytest.mark.parametrize("env_id", env_ids())
 def test_check_env_every_id(env_id):
-    env = gym.make(env_id, episode_index=0) if "Training" not in env_id else gym.make(env_id)
-    check_env(env.unwrapped, skip_render_check=True)
+    """gymnasium's checker with its defaults (its render check makes a second env of the id in
+    this process: that one runs SUMO over TraCI)."""
+    env = gym.make(env_id)
+    check_env(env.unwrapped)
     env.close()
 
 
@@ -93,8 +95,8 @@ def test_infeasible_lane_change_becomes_keep_and_mask_says_so():
 
 @pytest.mark.slow
 def test_expert_clean_success_on_a_static_episode():
-    env = gym.make("hbmp_bench/Town01-OneTurn-v0", episode_index=0).unwrapped
     agent = load_agent("expert")
+    env = gym.make("hbmp_bench/Town01-OneTurn-v0", episode_index=0, **agent_env_kwargs(agent)).unwrapped
     obs, info = env.reset(seed=0)
     agent.reset(info)
     while True:
@@ -111,8 +113,8 @@ def test_expert_clean_success_on_a_static_episode():
 
 
 def test_occupancy_marks_background_vehicles():
-    env = gym.make("hbmp_bench/Town01-NavigationDynamic-v0", episode_index=0).unwrapped
     agent = load_agent("expert")
+    env = gym.make("hbmp_bench/Town01-NavigationDynamic-v0", episode_index=0, **agent_env_kwargs(agent)).unwrapped
     obs, info = env.reset(seed=0)
     agent.reset(info)
     seen = 0.0

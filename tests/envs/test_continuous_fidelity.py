@@ -5,7 +5,8 @@ import pytest
 
 from hbmp_bench.agents import load_agent
 from hbmp_bench.envs.behavior_env import BehaviorEnv
-from hbmp_bench.envs.world import EGO_ID, WorldConfig
+from hbmp_bench.envs.config import WorldConfig
+from hbmp_bench.envs.world import EGO_ID
 
 
 def _run(env, agent_name="expert", max_steps=400):
@@ -68,7 +69,7 @@ def test_ego_pose_in_sumo_follows_the_vehicle_model():
     for _ in range(3):
         env.step(0)  # speed_up
     world = env.world
-    model = world.driver.model
+    model = world.ego_driver.model
     front = np.array(libsumo.vehicle.getPosition(EGO_ID))
     centre = front - world.sim._dims[EGO_ID][0] / 2 * np.array([np.cos(model.yaw), np.sin(model.yaw)])
     env.close()
@@ -102,16 +103,17 @@ def test_route_is_replanned_only_once_lane_changes_are_closed():
                  if ep.start_lane not in net.lanes_to(ep.route[0], ep.route[1]))
     env = BehaviorEnv(town="Town05", task="OneTurn", episode_index=index, fidelity="event")
     env.reset(seed=1)
-    world = env.world
-    original = world.route
-    assert world.followed_lane not in world.net.lanes_to(original[0], original[1])
+    ego = env.world.ego
+    route = ego.route
+    original = route.edges
+    assert ego.followed_lane not in env.world.net.lanes_to(original[0], original[1])
     for _ in range(20):
         env.step(0)  # speed up, staying in the lane
-    assert world.route == original and world.reroutes == 0
+    assert route.edges == original and route.reroutes == 0
     for _ in range(600):  # drive on in the wrong lane to its end
         _, _, terminated, truncated, _ = env.step(4)
-        if world.reroutes or terminated or truncated:
+        if route.reroutes or terminated or truncated:
             break
     env.close()
-    assert world.reroutes == 1 and world.route[0] == original[0] and world.route[1] != original[1]
-    assert world.route[-1] == original[-1]  # still to the same goal edge
+    assert route.reroutes == 1 and route.edges[0] == original[0] and route.edges[1] != original[1]
+    assert route.edges[-1] == original[-1]  # still to the same goal edge

@@ -7,9 +7,10 @@ import libsumo
 import numpy as np
 import pytest
 
-from hbmp_bench.agents import load_agent
+from hbmp_bench.agents import agent_env_kwargs, load_agent
 from hbmp_bench.envs import BehaviorEnv
-from hbmp_bench.envs.world import EGO_ID, DrivingWorld, WorldConfig
+from hbmp_bench.envs.config import WorldConfig
+from hbmp_bench.envs.world import EGO_ID, DrivingWorld
 from hbmp_bench.maps.roadnet import point_along
 from hbmp_bench.planning import VehicleState as ModelState
 from hbmp_bench.scenarios import suite_episodes
@@ -116,10 +117,10 @@ def _route_centreline(net, ep):
 def _push(world, xy, yaw, speed):
     """One control period as the continuous driver runs it: the model's pose into SUMO, one SUMO
     step, the world's detection."""
-    world.driver.model = ModelState(float(xy[0]), float(xy[1]), float(yaw), float(speed))
-    world.driver.off_map = not world.sim.move_to_xy(EGO_ID, xy, yaw)
+    world.ego_driver.model = ModelState(float(xy[0]), float(xy[1]), float(yaw), float(speed))
+    world.ego_driver.off_map = not world.sim.move_to_xy(EGO_ID, xy, yaw)
     world.sim.step()
-    return world.after_sim_step(world.sim.snapshot())
+    return world.ego.after_sim_step(world.sim.snapshot())
 
 
 def _drive_polyline(world, line, start_s, end_s, speed, left_offset=0.0):
@@ -155,8 +156,8 @@ def test_red_lights_crossed_at_speed_are_one_event_each(world, speed, signal):
     front_start, front_end = start + EGO_TYPE.length / 2, end + EGO_TYPE.length / 2
     truth = sum(front_start < x <= front_end for x in stop_lines) if signal == "r" else 0
     assert len(stop_lines) == 3
-    assert world.detector.totals["red_light"] == truth
-    assert world.detector.totals["wrong_lane"] + world.detector.totals["off_road"] == 0
+    assert world.ego.detector.totals["red_light"] == truth
+    assert world.ego.detector.totals["wrong_lane"] + world.ego.detector.totals["off_road"] == 0
 
 
 def test_circling_off_the_road_beside_a_red_light_is_no_red_light_and_one_off_road(world):
@@ -182,8 +183,8 @@ def test_circling_off_the_road_beside_a_red_light_is_no_red_light_and_one_off_ro
         sumo_lanes.append(world.sim.vehicle_state(EGO_ID).lane)
     flips = sum(a != b for a, b in zip(sumo_lanes[:-1], sumo_lanes[1:]))
     assert flips >= 6 and lane.id in sumo_lanes and any(ln.startswith(":") for ln in sumo_lanes)
-    assert world.detector.totals["red_light"] == 0
-    assert world.detector.totals["off_road"] == 1 and world.detector.totals["wrong_lane"] == 0
+    assert world.ego.detector.totals["red_light"] == 0
+    assert world.ego.detector.totals["off_road"] == 1 and world.ego.detector.totals["wrong_lane"] == 0
 
 
 def test_opposite_lane_across_three_junctions_is_one_wrong_lane_event(world):
@@ -192,8 +193,8 @@ def test_opposite_lane_across_three_junctions_is_one_wrong_lane_event(world):
     world.start(ep, seed=0)
     width = world.net.lane(ep.start_lane).width
     _drive_polyline(world, line, ep.start_pos + 5.0, stop_lines[-1] + 20.0, 10.0, left_offset=width)
-    assert world.detector.totals["wrong_lane"] == 1
-    assert world.detector.totals["off_road"] == 0
+    assert world.ego.detector.totals["wrong_lane"] == 1
+    assert world.ego.detector.totals["off_road"] == 0
 
 
 def test_expert_stops_at_red_lights_and_drives_a_clean_episode():
@@ -201,8 +202,8 @@ def test_expert_stops_at_red_lights_and_drives_a_clean_episode():
     light at least once, reaches the goal and no detector fires. The first light starts in the phase
     that serves the cross street (its program runs on from there), so the ego meets a red whatever
     the towns' green times."""
-    env = BehaviorEnv(town="Town01", task="Straight", episode_index=0)
     agent = load_agent("expert")
+    env = BehaviorEnv(town="Town01", task="Straight", episode_index=0, **agent_env_kwargs(agent))
     obs, info = env.reset(seed=0)
     ep = env.world.episode
     assert ep == _three_light_episode(env.world.net)

@@ -102,7 +102,7 @@ def test_privileged_fields_in_a_real_episode(fidelity):
     from hbmp_bench.envs import BehaviorEnv
     from hbmp_bench.envs.world import EGO_ID
 
-    env = BehaviorEnv(town="Town01", task="NavigationDynamic", suite="hbmp", fidelity=fidelity)
+    env = BehaviorEnv(town="Town01", task="NavigationDynamic", suite="hbmp", fidelity=fidelity, privileged=True)
     agent = load_agent("expert")
     obs, info = env.reset(seed=0, options={"episode_index": 0})
     agent.reset(info)
@@ -160,3 +160,51 @@ def test_junction_foes_measures_both_cars_to_the_conflict_area():
     assert approaching == {"ego_dist_m": 16.0, "ego_exit_m": 19.0, "foe_dist_m": 24.0, "foe_exit_m": 27.5,
                            "foe_speed_mps": 8.0, "ego_yields": True, "foe_yields": False, "foe_signal": "G"}
     assert inside["foe_dist_m"] == 2.0 and inside["foe_signal"] == ""  # inside the junction: its light is behind it
+
+
+def _drive(privileged: bool, actions: list[int] | None = None, decisions: int = 300) -> tuple[list, list, list]:
+    """(actions, observations, scenes) of the expert (or of the replayed ``actions``) on one
+    event-fidelity episode with traffic lights, background vehicles and pedestrians."""
+    from hbmp_bench.agents import load_agent
+    from hbmp_bench.envs import BehaviorEnv
+
+    env = BehaviorEnv(town="Town01", task="NavigationDynamic", suite="hbmp", fidelity="event", privileged=privileged)
+    agent = load_agent("expert")
+    taken, seen, scenes = [], [], []
+    try:
+        obs, info = env.reset(seed=0, options={"episode_index": 0})
+        agent.reset(info)
+        for k in range(decisions if actions is None else len(actions)):
+            seen.append(obs)
+            scenes.append(info["scene"])
+            action = int(agent.act(obs, info)) if actions is None else actions[k]
+            taken.append(action)
+            obs, _, terminated, truncated, info = env.step(action)
+            if terminated or truncated:
+                break
+    finally:
+        env.close()
+    return taken, seen, scenes
+
+
+@pytest.mark.slow
+def test_a_default_env_builds_no_privileged_scene(monkeypatch):
+    """Without ``privileged=True`` the scene holds R_t's quantities and the goal distance only,
+    ``PrivilegedScene.fields`` is never called, and M_t and R_t are those of a privileged env."""
+    from hbmp_bench.envs.privileged import PrivilegedScene
+    from hbmp_bench.envs.scene import NON_PRIVILEGED_FIELDS
+
+    actions, privileged_obs, privileged_scenes = _drive(privileged=True)
+    assert any("lights_ahead" in s for s in privileged_scenes)
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("PrivilegedScene.fields called in an env without privileged=True")
+
+    monkeypatch.setattr(PrivilegedScene, "fields", refuse)
+    _, default_obs, default_scenes = _drive(privileged=False, actions=actions)
+    assert len(default_obs) == len(privileged_obs) > 50
+    for plain, full in zip(default_scenes, privileged_scenes):
+        assert set(plain) == set(NON_PRIVILEGED_FIELDS)
+        assert plain == {k: full[k] for k in NON_PRIVILEGED_FIELDS}
+    for plain, full in zip(default_obs, privileged_obs):
+        assert np.array_equal(plain["road"], full["road"]) and np.array_equal(plain["occupancy"], full["occupancy"])

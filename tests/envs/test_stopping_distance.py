@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from hbmp_bench.envs.stopping import STANDSTILL_MPS, lawful_stopping_distance, measure_stop
-from hbmp_bench.envs.world import WorldConfig
+from hbmp_bench.envs.config import WorldConfig
 
 KMH_50 = 50.0 / 3.6
 

@@ -1,7 +1,5 @@
 """The PettingZoo traffic env: API conformance, seeding, decision timing, bad input."""
 
-import multiprocessing as mp
-
 import numpy as np
 import pytest
 from pettingzoo.test import api_test, parallel_api_test, parallel_seed_test
@@ -13,75 +11,42 @@ SMALL = dict(town="Town01", task="NavigationDynamic", episode_index=0, controlle
 SPEED_UP, SPEED_DOWN, KEEP = 0, 1, 4
 
 
-def _worker(conn, kwargs):
-    env = traffic_v0.parallel_env(**kwargs)
-    while True:
-        name, args = conn.recv()
-        if name == "close":
-            env.close()
-            conn.send(None)
-            return
-        if name == "agents":
-            conn.send(list(env.agents))
-            continue
-        conn.send(getattr(env, name)(*args))
-
-
-class ProcessParallelEnv:
-    """The parallel env in its own process (libsumo runs one simulation per process, and
-    ``parallel_seed_test`` steps two envs in turn)."""
-
-    def __init__(self, **kwargs):
-        probe = traffic_v0.parallel_env(**kwargs)
-        self.possible_agents, self.metadata = probe.possible_agents, probe.metadata
-        self._spaces = (probe.observation_space("ego"), probe.action_space("ego"))
-        self._conn, child = mp.get_context("spawn").Pipe()
-        self._proc = mp.get_context("spawn").Process(target=_worker, args=(child, kwargs), daemon=True)
-        self._proc.start()
-
-    def _call(self, name, *args):
-        self._conn.send((name, args))
-        return self._conn.recv()
-
-    @property
-    def agents(self):
-        return self._call("agents")
-
-    def observation_space(self, agent):
-        return self._spaces[0]
-
-    def action_space(self, agent):
-        return self._spaces[1]
-
-    def reset(self, seed=None, options=None):
-        return self._call("reset", seed, options)
-
-    def step(self, actions):
-        return self._call("step", actions)
-
-    def close(self):
-        if self._proc.is_alive():
-            self._call("close")
-            self._proc.join(timeout=10)
+FIDELITIES = ("continuous", "event")
 
 
 @pytest.mark.slow
-def test_parallel_api():
-    env = traffic_v0.parallel_env(**SMALL, ego_fidelity="event")
+@pytest.mark.parametrize("fidelity", FIDELITIES)
+def test_parallel_api(fidelity):
+    env = traffic_v0.parallel_env(**SMALL, ego_fidelity=fidelity, background_fidelity=fidelity)
     parallel_api_test(env, num_cycles=40)
     env.close()
 
 
 @pytest.mark.slow
-def test_parallel_seed():
-    parallel_seed_test(lambda: ProcessParallelEnv(**SMALL, ego_fidelity="event"), num_cycles=20)
+@pytest.mark.parametrize("fidelity", FIDELITIES)
+def test_parallel_seed(fidelity):
+    """Two envs stepped in turn in this process (the second one runs SUMO over TraCI)."""
+    parallel_seed_test(lambda: traffic_v0.parallel_env(**SMALL, ego_fidelity=fidelity, background_fidelity=fidelity),
+                       num_cycles=20)
 
 
 @pytest.mark.slow
-def test_aec_api():
-    env = traffic_v0.env(**SMALL, ego_fidelity="event")
+@pytest.mark.parametrize("fidelity", FIDELITIES)
+def test_aec_api(fidelity):
+    env = traffic_v0.env(**SMALL, ego_fidelity=fidelity, background_fidelity=fidelity)
     api_test(env, num_cycles=15)
     env.close()
+
+
+@pytest.mark.slow
+def test_api_tests_with_the_default_settings():
+    """The README's settings: Town01 NavigationDynamic, every background vehicle an agent, ego continuous."""
+    env = traffic_v0.parallel_env()
+    parallel_api_test(env, num_cycles=30)
+    env.close()
+    aec = traffic_v0.env()
+    api_test(aec, num_cycles=10)
+    aec.close()
 
 
 @pytest.mark.slow
@@ -208,13 +173,13 @@ def test_ego_env_drives_background_agents_with_a_policy():
                              ego_fidelity="event")
     obs, info = env.reset(seed=0)
     assert env.observation_space.contains(obs)
-    start = env.parallel.world.ego.sim.time
+    start = env.parallel.world.sim.time
     for _ in range(20):
         obs, reward, terminated, truncated, info = env.step(0)
         assert env.observation_space.contains(obs)
         if terminated or truncated:
             break
-    elapsed = env.parallel.world.ego.sim.time - start
+    elapsed = env.parallel.world.sim.time - start
     speeds = [env._infos[a]["scene"]["speed_mps"] for a in ("bg0", "bg1", "bg2")]
     env.close()
     assert elapsed >= 1.9  # 20 ego decisions of 0.1 s

@@ -8,7 +8,7 @@ import pytest
 
 from hbmp_bench.evaluation import RunnerLimits
 from hbmp_bench.evaluation.channel import AgentDescription
-from hbmp_bench.evaluation.evaluate import with_agent_env
+from hbmp_bench.evaluation.evaluate import is_privileged, with_agent_env
 from hbmp_bench.evaluation.integrity import BoardSnapshot, RecordsLedger, TamperedError
 from hbmp_bench.evaluation.leaderboard import check_results, results_document
 from hbmp_bench.evaluation.sandbox import agent_account
@@ -83,8 +83,12 @@ def test_results_files_must_agree_with_their_episodes():
     records = [RECORD, EpisodeRecord(**{**RECORD.to_dict(), "episode": 1, "end_reason": "sim_error"})]
     doc = results_document("corl2017", "a", records, towns=["Town01"], tasks=["Straight"], episodes=[0, 1],
                            fidelity="event")
-    assert doc["sim_errors"] == 1 and not doc["complete"]
+    assert doc["sim_errors"] == 1 and not doc["complete"] and doc["privileged"] is False
     doc = json.loads(json.dumps(doc))
+    unflagged = copy.deepcopy(doc)
+    del unflagged["privileged"]
+    with pytest.raises(ValueError, match="no privileged flag"):
+        check_results(unflagged)
     lying = copy.deepcopy(doc)
     lying["sim_errors"] = 0
     with pytest.raises(ValueError, match="says sim_errors=0 but its episodes hold 1"):
@@ -107,6 +111,11 @@ def test_an_agent_may_only_ask_for_known_envs_and_observation_options():
         with_agent_env(limits, AgentDescription(None, (("density", "empty"),)))
     with pytest.raises(ValueError, match="observation kind"):
         with_agent_env(limits, AgentDescription(None, (("observation", "birds_eye"),)))
+    privileged = with_agent_env(limits, AgentDescription(None, (("privileged", True),)))
+    assert dict(privileged.env_kwargs) == {"privileged": True} and is_privileged(privileged)
+    assert not is_privileged(control)
+    with pytest.raises(ValueError, match="privileged must be True or False"):
+        with_agent_env(limits, AgentDescription(None, (("privileged", "yes"),)))
     trusted = with_agent_env(RunnerLimits(env_factory="tiny_suite:make_env"), AgentDescription())
     assert trusted.env_factory == "tiny_suite:make_env"  # the evaluator may name any env
 

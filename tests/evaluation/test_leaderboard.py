@@ -55,11 +55,13 @@ def test_complete_entries_carry_provenance_and_are_ranked(board):
     assert doc["aggregates"]["success_pct_by_task"] == {"Straight": 100.0}
     keep = json.loads(entry_path(board, tiny_suite.NAME, "keep", subset=False, fidelity=FIDELITY).read_text())
     assert keep["summary"]["success_pct"] == 0.0
+    assert doc["privileged"] is True and keep["privileged"] is False  # the expert asks for privileged=True
 
     readme = (board / tiny_suite.NAME / "README.md").read_text()
     assert spec.definition_hash() in readme and "## Fidelity: event" in readme
     rows = [line for line in readme.splitlines() if line.startswith("| 1 ") or line.startswith("| 2 ")]
-    assert rows[0].startswith("| 1 | `expert` | 100.0") and rows[1].startswith("| 2 | `keep` | 0.0")
+    assert "| rank | agent | privileged | success % |" in readme
+    assert rows[0].startswith("| 1 | `expert` | yes | 100.0") and rows[1].startswith("| 2 | `keep` | no | 0.0")
     assert "Partial runs" not in readme
     assert len(list(runs_dir(board, tiny_suite.NAME).glob("*.jsonl"))) == 2  # raw records kept for resuming
 
@@ -87,6 +89,19 @@ def test_a_stale_results_file_is_refused_with_a_clear_message(board, tmp_path):
     assert main(["leaderboard", "render", "--suite", tiny_suite.NAME, "--board-dir", str(copy)]) == 2
 
 
+def test_a_format_1_results_file_reads_as_privileged(board, tmp_path):
+    """Before the privileged flag (results format 2) every agent was handed the privileged scene."""
+    path = entry_path(board, tiny_suite.NAME, "keep", subset=False, fidelity=FIDELITY)
+    doc = json.loads(path.read_text())
+    assert doc["format"] == 2 and doc["privileged"] is False
+    old = {k: v for k, v in doc.items() if k != "privileged"} | {"format": 1}
+    legacy = tmp_path / "legacy.json"
+    legacy.write_text(json.dumps(old))
+    target = add_results(legacy, tmp_path / "board")
+    assert [(e["agent"], e["privileged"]) for e in load_entries(tmp_path / "board", tiny_suite.NAME)] == [("keep", True)]
+    assert target.exists()
+
+
 def test_add_installs_a_checked_results_file(board, tmp_path):
     target = add_results(entry_path(board, tiny_suite.NAME, "expert", subset=False, fidelity=FIDELITY), tmp_path)
     assert target == entry_path(tmp_path, tiny_suite.NAME, "expert", subset=False, fidelity=FIDELITY)
@@ -107,7 +122,7 @@ def test_a_corl2017_subset_is_written_apart_and_not_ranked(tmp_path, capsys):
     assert doc["selection"] == {"towns": ["Town01"], "tasks": ["Straight"], "episodes": [0]}
     readme = (tmp_path / "corl2017" / "README.md").read_text()
     assert "No complete entries yet." in readme
-    assert "## Partial runs (not ranked)" in readme and "| – | `expert` | 100.0" in readme
+    assert "## Partial runs (not ranked)" in readme and "| – | `expert` | yes | 100.0" in readme
 
 
 def test_each_fidelity_has_its_own_entry(tmp_path):

@@ -143,3 +143,35 @@ def test_route_length_view_takes_the_episodes_that_reached_the_goal():
     assert straight["distance_over_route_max"] == pytest.approx(1.36)
     assert view.loc[("a", "Town01", "OneTurn"), "distance_over_route_median"] == pytest.approx(1.25)
     assert "route_length" in build_report(df).views
+
+
+def test_printed_views_say_what_they_count(two_sets, tmp_path):
+    from hbmp_bench.metrics.records import DRIVING_SCORE_DEFINITION, PENALTIES
+    from hbmp_bench.metrics.report import NO_EVENT, VIEW_LEGENDS, readable
+
+    report = build_report(two_sets)
+    assert set(VIEW_LEGENDS) == set(report.views)
+    assert "EPISODES" in VIEW_LEGENDS["failures"] and "EVENT" in VIEW_LEGENDS["km_between"]
+    assert DRIVING_SCORE_DEFINITION in VIEW_LEGENDS["driving"]
+    assert all(f"{factor:g} per" in DRIVING_SCORE_DEFINITION for factor in PENALTIES.values())
+    km = report["km_between"]
+    assert math.isinf(km.loc["b", "red_light"])  # the frame and its CSV keep inf (JSON: null)
+    assert readable(km).loc["b", "red_light"] == NO_EVENT
+    assert readable(km).loc["a", "red_light"] == km.loc["a", "red_light"]
+    assert NO_EVENT in to_markdown(km) and "inf" not in to_markdown(km)
+    write_report(report, tmp_path / "report")
+    md = (tmp_path / "report" / "report.md").read_text()
+    assert all(legend in md for legend in VIEW_LEGENDS.values())
+
+
+def test_summary_lines_explain_every_summary_key():
+    from hbmp_bench.metrics.summary import SUMMARY_LEGEND, summarize, summary_lines
+
+    summary = summarize([rec(red_light=2), rec(episode=1)])
+    assert set(summary) == set(SUMMARY_LEGEND)
+    lines = summary_lines({"records": "x.jsonl", **summary})
+    assert lines[0].split() == ["records", "x.jsonl"]
+    red = next(line for line in lines if line.startswith("red_light"))
+    assert red.split()[1] == "2" and "events" in red
+    score = next(line for line in lines if line.startswith("mean_driving_score"))
+    assert "route completion" in score and "penalty" in score

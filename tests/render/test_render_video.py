@@ -9,7 +9,8 @@ from PIL import Image
 from hbmp_bench.cli import main
 from hbmp_bench.envs.behavior_env import BehaviorEnv
 from hbmp_bench.errors import UnknownNameError
-from hbmp_bench.render.video import record_episode, write_gif, write_video
+from hbmp_bench.envs.recording import record_episode
+from hbmp_bench.render.video import write_gif, write_video
 
 
 def _frames(n: int, h: int = 48, w: int = 64) -> list[np.ndarray]:

@@ -8,7 +8,7 @@ SUMO's instantaneous lane changes adds ~3 m of sideways jump to it, which the me
 import numpy as np
 import pytest
 
-from hbmp_bench.agents import load_agent
+from hbmp_bench.agents import agent_env_kwargs, load_agent
 from hbmp_bench.envs import make
 
 EPISODES = range(10)
@@ -18,8 +18,8 @@ MAX_STEP_M = 1.6
 
 def _drive(town: str, index: int) -> tuple[dict, np.ndarray]:
     """The expert's record of one Straight episode and its progress [m] after every decision."""
-    env = make(f"hbmp_bench/{town}-Straight-v0", episode_index=index, fidelity="event").unwrapped
     agent = load_agent("expert")
+    env = make(f"hbmp_bench/{town}-Straight-v0", episode_index=index, fidelity="event", **agent_env_kwargs(agent)).unwrapped
     try:
         obs, info = env.reset(seed=0)
         agent.reset(info)

@@ -7,7 +7,7 @@ from gymnasium.utils.env_checker import check_env
 
 import hbmp_bench  # noqa: F401  (registers the ids)
 from hbmp_bench.agents import load_agent
-from hbmp_bench.envs.world import BEHAVIORS
+from hbmp_bench.planning.behaviors import BEHAVIORS
 from hbmp_bench.errors import UnknownNameError
 from hbmp_bench.transfer import SCENES, transfer_env_ids
 from hbmp_bench.transfer.adapter import BEHAVIOR_TO_META, META_ACTIONS, META_TO_BEHAVIOR, to_behavior, to_meta_action

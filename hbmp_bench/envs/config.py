@@ -1,0 +1,162 @@
+"""The frozen configurations of an environment: which scenario (:class:`ScenarioConfig`) and how
+its world runs (:class:`WorldConfig`). Each validates its fields in one place, at construction."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+
+from hbmp_bench.envs.drivers import FIDELITIES, ContinuousConfig
+from hbmp_bench.envs.observation import ObservationConfig
+from hbmp_bench.planning.behaviors import BehaviorConfig
+from hbmp_bench.scenarios import (Episode, Traffic, check_task, check_town, get_suite, sample_episode,
+                                  suite_episodes, traffic_for)
+
+REWARDS = ("dense", "sparse")
+EGO_DRIVERS = ("behavior", "control")
+
+
+@dataclass(frozen=True)
+class ScenarioConfig:
+    """Which episodes an env runs.
+
+    Attributes:
+        town: map name (``Town01``..``Town05`` or an imported map).
+        task: ``Straight``, ``OneTurn``, ``Navigation`` or ``NavigationDynamic``.
+        suite: episode list and rules (``corl2017``, ``hbmp``, ``nocrash-*``).
+        episode_index: fix one episode of the list; None draws one per reset from the env's
+            generator (the reset seed).
+        random_goals: ignore the suite's list and draw a fresh start and goal every reset (training).
+        density: override the background traffic (``empty``, ``corl``, ``regular``, ``dense``);
+            None: each episode's own.
+
+    Raises:
+        UnknownNameError: an unknown town, task, suite or density (naming the valid ones).
+        ValueError: ``episode_index`` outside the list, or given with ``random_goals``.
+    """
+
+    town: str = "Town01"
+    task: str = "Navigation"
+    suite: str = "corl2017"
+    episode_index: int | None = None
+    random_goals: bool = False
+    density: str | None = None
+
+    def __post_init__(self):
+        check_town(self.town)
+        check_task(self.task)
+        object.__setattr__(self, "suite", get_suite(self.suite).name)
+        if self.density is not None:
+            traffic_for(self.town, self.task, self.density)
+        if self.episode_index is not None:
+            if self.random_goals:
+                raise ValueError("episode_index and random_goals exclude each other")
+            if not 0 <= self.episode_index < len(self.episodes):
+                raise ValueError(f"episode_index must be in [0, {len(self.episodes)}), got {self.episode_index}")
+
+    @cached_property
+    def traffic(self) -> Traffic | None:
+        """The traffic ``density`` sets for every episode (None: each episode's own)."""
+        return None if self.density is None else traffic_for(self.town, self.task, self.density)
+
+    @cached_property
+    def episodes(self) -> tuple[Episode, ...]:
+        """The suite's episode list with the traffic override applied (empty with ``random_goals``)."""
+        if self.random_goals:
+            return ()
+        episodes = suite_episodes(self.suite, self.town, self.task)
+        if self.traffic is not None:
+            episodes = tuple(dataclasses.replace(e, traffic=self.traffic) for e in episodes)
+        return episodes
+
+    @property
+    def least_vehicles(self) -> int:
+        """The fewest background vehicles any episode of this config has."""
+        if self.random_goals:
+            return (self.traffic or traffic_for(self.town, self.task, None)).vehicles
+        pool = self.episodes if self.episode_index is None else self.episodes[self.episode_index:self.episode_index + 1]
+        return min(e.traffic.vehicles for e in pool)
+
+    def pick(self, rng: np.random.Generator, episode_index: int | None = None) -> Episode:
+        """The episode of one reset: ``episode_index`` (else the configured one) of the list, else
+        one drawn with ``rng``; with ``random_goals`` a fresh one drawn with ``rng``."""
+        if self.random_goals:
+            traffic = self.traffic if self.traffic is not None else traffic_for(self.town, self.task, None)
+            seed = int(rng.integers(2**31))
+            pose_task = "Navigation" if self.task == "NavigationDynamic" else self.task
+            return sample_episode(self.town, pose_task, np.random.default_rng(seed), suite=get_suite(self.suite),
+                                  index=0, seed=seed, traffic=traffic)
+        index = self.episode_index if episode_index is None else episode_index
+        if index is None:
+            index = int(rng.integers(len(self.episodes)))
+        if not 0 <= index < len(self.episodes):
+            raise ValueError(f"episode_index must be in [0, {len(self.episodes)}), got {index}")
+        return self.episodes[index]
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """Options of a driving world.
+
+    Attributes:
+        fidelity: the ego's: ``continuous`` (default: the paper's behavior-conditioned sampling
+            motion planner drives a bicycle model whose pose is pushed into SUMO every step; one
+            behavior lasts until it converges, 1-8 s) or ``event`` (the paper's SUMO stage: SUMO's
+            speed and lane-change commands complete a behavior within ``decision_period_s``).
+        ego_driver: ``behavior`` (default: the fidelity's behavior driver) or ``control`` (no
+            behavior layer: the flat baseline sets acceleration and steering of the bicycle model,
+            :class:`~hbmp_bench.envs.drivers.ControlDriver`; continuous fidelity only).
+        background_fidelity: the background agents' (default ``event``).
+        reward: ``dense`` (r_k + r_T, HBMP: r_k = lambda(c~_total) of the executed trajectory,
+            0 in event fidelity) or ``sparse`` (r_T only, HBMP-S).
+        decision_period_s: simulated time per decision in event fidelity [s] (paper: 10 Hz).
+        behavior: the v_ref rule of speed_up / speed_down, shared by both fidelities.
+        continuous: planner, executor and vehicle-model options of the continuous fidelity.
+        observation: M_t grid options.
+        background_route_m: length of the chained route each background vehicle gets, long
+            enough that it circulates for the whole episode [m].
+        step_length_s: SUMO step [s] (the planner's control period in continuous fidelity).
+        privileged: add the privileged fields of :mod:`hbmp_bench.envs.privileged` to the ego's
+            ``info["scene"]`` (light schedules, junction foes, pedestrians, leader, crossings:
+            what the rule-based expert, a demonstrator, reads). Off by default: a learned agent
+            sees M_t, R_t and the scene's R_t quantities only, and no step pays for the rest. An
+            evaluated agent asks for it through its ``env_kwargs``; its results are marked.
+    """
+
+    fidelity: str = "continuous"
+    ego_driver: str = "behavior"
+    background_fidelity: str = "event"
+    reward: str = "dense"
+    decision_period_s: float = 0.1
+    observation: ObservationConfig = field(default_factory=ObservationConfig)
+    behavior: BehaviorConfig = field(default_factory=BehaviorConfig)
+    continuous: ContinuousConfig = field(default_factory=ContinuousConfig)
+    background_route_m: float = 4000.0
+    step_length_s: float = 0.1
+    privileged: bool = False
+
+    def __post_init__(self):
+        if not isinstance(self.privileged, bool):
+            raise ValueError(f"privileged must be True or False, got {self.privileged!r}")
+        if self.fidelity not in FIDELITIES:
+            raise ValueError(f"fidelity must be one of {FIDELITIES}, got {self.fidelity!r}")
+        if self.ego_driver not in EGO_DRIVERS:
+            raise ValueError(f"ego_driver must be one of {EGO_DRIVERS}, got {self.ego_driver!r}")
+        if self.ego_driver == "control" and self.fidelity != "continuous":
+            raise ValueError(f"the control driver runs the bicycle model: fidelity must be 'continuous', "
+                             f"got {self.fidelity!r}")
+        if self.background_fidelity not in FIDELITIES:
+            raise ValueError(f"background_fidelity must be one of {FIDELITIES}, got {self.background_fidelity!r}")
+        if self.reward not in REWARDS:
+            raise ValueError(f"reward must be one of {REWARDS}, got {self.reward!r}")
+        if self.decision_period_s < self.step_length_s - 1e-9:
+            raise ValueError("decision_period_s must be >= step_length_s")
+        if abs(self.continuous.executor.dt - self.step_length_s) > 1e-9:
+            raise ValueError("continuous.executor.dt must equal step_length_s (one control period per SUMO step)")
+
+    @property
+    def steps_per_decision(self) -> int:
+        return max(1, int(round(self.decision_period_s / self.step_length_s)))

@@ -1,0 +1,118 @@
+"""Scoring one episode: the paper's terminal reward r_T, progress along the route, distance, and
+the episode record. Shared by the SUMO worlds (:mod:`hbmp_bench.envs`) and the highway-env
+transfer env (:mod:`hbmp_bench.transfer`), so both score the same way."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+
+from hbmp_bench.metrics.detectors import StepEvents
+from hbmp_bench.metrics.records import EpisodeRecord, driving_score
+
+TERMINAL_REWARD = {
+    "goal": 100.0,
+    "collision": -50.0,
+    "timeout": -50.0,
+    "red_light": -10.0,
+    "wrong_lane": -1.0,
+    "off_road": -1.0,
+}
+"""The paper's r_T: +100 goal, −50 collision or overtime, −10 red light, −1 wrong lane (off-road
+is counted like a wrong lane). Each event pays once, when it happens."""
+
+PROGRESS_SLACK_M = 5.0
+"""A progress reading more than this beyond the route's length is a mismatch, not progress [m]."""
+
+
+def terminal_reward(*, goal: bool = False, collisions: int = 0, timed_out: bool = False, red_light: int = 0,
+                    wrong_lane: int = 0, off_road: int = 0) -> float:
+    """The paper's r_T of what happened (see ``TERMINAL_REWARD``)."""
+    r = TERMINAL_REWARD
+    return float(
+        r["goal"] * goal
+        + r["collision"] * collisions
+        + r["timeout"] * timed_out
+        + r["red_light"] * red_light
+        + r["wrong_lane"] * wrong_lane
+        + r["off_road"] * off_road
+    )
+
+
+def events_reward(ev: StepEvents, timed_out: bool = False) -> float:
+    """r_T of the detectors' events ``ev``."""
+    return terminal_reward(goal=ev.goal_reached, collisions=ev.collisions, timed_out=timed_out,
+                           red_light=ev.red_light, wrong_lane=ev.wrong_lane, off_road=ev.off_road)
+
+
+def add_events(total: StepEvents, ev: StepEvents) -> None:
+    """Add the events ``ev`` into ``total`` in place (counts add, flags or)."""
+    for f in dataclasses.fields(StepEvents):
+        value = getattr(ev, f.name)
+        merged = (getattr(total, f.name) or value) if isinstance(value, bool) else getattr(total, f.name) + value
+        setattr(total, f.name, merged)
+
+
+@dataclass(frozen=True)
+class EpisodeId:
+    """What names an episode in its record."""
+
+    suite: str
+    town: str
+    task: str
+    episode: int
+    seed: int
+    fidelity: str
+    route_length_m: float
+
+
+class EpisodeScorer:
+    """Distance driven [m], progress along the route [m] (monotone), and the episode record.
+
+    Args:
+        route_length_m: length of the route to drive [m].
+        start_xy: (2,) where the vehicle starts [m].
+    """
+
+    def __init__(self, route_length_m: float, start_xy: np.ndarray):
+        self.route_length_m = float(route_length_m)
+        self.distance_m = 0.0
+        self.progress_m = 0.0
+        self._last_xy = np.asarray(start_xy, dtype=float)
+
+    def moved_to(self, xy: np.ndarray) -> None:
+        """The vehicle's centre is now at ``xy`` (2,) [m]: adds the straight step to the distance."""
+        self.distance_m += float(np.hypot(*(xy - self._last_xy)))
+        self._last_xy = xy
+
+    def progressed_to(self, progress_m: float) -> None:
+        """A progress reading [m]: progress never goes back and stops at the route's length;
+        readings past it by more than ``PROGRESS_SLACK_M`` are ignored."""
+        if progress_m <= self.route_length_m + PROGRESS_SLACK_M:
+            self.progress_m = max(self.progress_m, min(progress_m, self.route_length_m))
+
+    def completion(self, success: bool) -> float:
+        """Route completion in [0, 1]: 1 on success, otherwise progress / route length."""
+        if success:
+            return 1.0
+        return float(np.clip(self.progress_m / max(self.route_length_m, 1e-6), 0.0, 1.0))
+
+    def record(self, episode: EpisodeId, *, agent: str, package_version: str, totals: dict[str, int], success: bool,
+               end_reason: str, duration_s: float, decisions: int, completion: float | None = None) -> EpisodeRecord:
+        """The episode record now (final once the episode has ended); ``completion`` overrides
+        :meth:`completion` (e.g. a scene without a goal, scored by time survived)."""
+        completion = self.completion(success) if completion is None else completion
+        return EpisodeRecord(
+            suite=episode.suite, town=episode.town, task=episode.task, episode=episode.episode, seed=episode.seed,
+            agent=agent, package_version=package_version, fidelity=episode.fidelity, success=success,
+            route_completion=round(completion, 4),
+            collision_vehicle=totals.get("collision_vehicle", 0),
+            collision_pedestrian=totals.get("collision_pedestrian", 0),
+            collision_other=totals.get("collision_other", 0), wrong_lane=totals.get("wrong_lane", 0),
+            off_road=totals.get("off_road", 0), red_light=totals.get("red_light", 0),
+            timeout=end_reason == "timeout", duration_s=round(duration_s, 2), distance_m=round(self.distance_m, 2),
+            route_length_m=episode.route_length_m, decisions=decisions,
+            driving_score=round(driving_score(completion, totals), 3), end_reason=end_reason or "running",
+        )
