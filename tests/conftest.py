@@ -1,5 +1,6 @@
 """Test hygiene shared by every folder."""
 
+import signal
 import sys
 import warnings
 
@@ -16,3 +17,14 @@ def _no_simulation_outlives_its_test(request):
     if holder is not None:
         holder.close()
         warnings.warn(f"{request.node.nodeid} left a libsumo simulation open", stacklevel=1)
+
+
+@pytest.fixture(autouse=True)
+def _ctrl_c_still_interrupts(request):
+    """A test that runs a pool child's code in this process (``watch_lifeline`` ignores SIGINT there)
+    would leave Ctrl-C ignored here and in every subprocess started later (an ignored signal is
+    inherited): restore Python's handler and say which test did it."""
+    yield
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        warnings.warn(f"{request.node.nodeid} left SIGINT ignored", stacklevel=1)

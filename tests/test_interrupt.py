@@ -65,7 +65,8 @@ def _interrupt(argv: list[str], started, children: int) -> tuple[str, str]:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([AGENTS_DIR, os.environ.get("PYTHONPATH", "")])}
     # a session of its own: the command and every process it starts share one process group, as in a terminal
     proc = subprocess.Popen([sys.executable, "-m", "hbmp_bench.cli", *argv], env=env, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as a terminal starts it
     try:
         deadline = time.monotonic() + 180
         while not started() and proc.poll() is None and time.monotonic() < deadline:
