@@ -17,6 +17,7 @@ evaluator's back raises ``TamperedError``.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import os
 import time
@@ -207,6 +208,7 @@ def evaluate(
                             len(selection) - len(records), privileged=is_privileged(limits))
 
 
+@functools.cache  # the package does not change under a running process
 def code_fingerprint() -> str:
     """sha256 (first 16 hex digits) of the package's own code and data: every ``.py`` file and
     every built-in net under ``hbmp_bench/``. An episode's outcome depends on the behavior layer,
