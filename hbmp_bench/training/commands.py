@@ -26,6 +26,8 @@ DEFAULT_EPISODES = {"il": 3000, "hbmp": 6000, "hbmp-s": 6000, "flat": 6000}
 DEFAULT_FIDELITY = {"il": "event", "hbmp": "continuous", "hbmp-s": "continuous", "flat": None}
 REWARD = {"il": "dense", "hbmp": "dense", "hbmp-s": "sparse", "flat": "env"}
 CONTROL_ENV = "hbmp_bench.envs.control_env:ControlEnv"
+CRITIC_WARMUP_EPISODES = 100
+"""Default critic warm-up of a PPO run that starts from an IL actor (none from a random one)."""
 
 
 def _command_line(args: argparse.Namespace) -> str:
@@ -34,6 +36,7 @@ def _command_line(args: argparse.Namespace) -> str:
              "--workers", str(args.workers), "--seed", str(args.seed), "--out", args.out]
     for flag, value in (("--fidelity", args.fidelity), ("--observation", args.observation),
                         ("--density", args.density), ("--init", args.init), ("--resume", args.resume),
+                        ("--critic-warmup", None if args.critic_warmup is None else str(args.critic_warmup)),
                         ("--backend", None if args.backend == "process" else args.backend),
                         ("--address", args.address)):
         if value is not None:
@@ -99,8 +102,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
             from hbmp_bench.training.ppo import PPOConfig, train_ppo
 
             label = None if init is None else (args.init or "il")
-            result = train_ppo(run, env_config, PPOConfig(mask_actions=args.mask_actions), init=init,
-                               init_label=label)
+            warmup = args.critic_warmup
+            if warmup is None:
+                warmup = CRITIC_WARMUP_EPISODES if init is not None else 0
+            # a resumed run keeps the options its checkpoint recorded
+            ppo = None if args.resume else PPOConfig(mask_actions=args.mask_actions, critic_warmup_episodes=warmup)
+            result = train_ppo(run, env_config, ppo, init=init, init_label=label)
     except KeyboardInterrupt:  # the trainer has closed its workers on the way out
         raise Interrupted(_resume_hint(args)) from None
     p = result["progress"]
@@ -162,6 +169,9 @@ def add_commands(subparsers) -> None:
     p.add_argument("--density", default=None, help="background traffic (empty, corl, regular, dense; default: the "
                                                     "scenario's)")
     p.add_argument("--mask-actions", action="store_true", help="mask infeasible behaviors in the policy")
+    p.add_argument("--critic-warmup", type=int, default=None, metavar="EPISODES",
+                   help=f"PPO: episodes at the start in which only the critic learns (default: "
+                        f"{CRITIC_WARMUP_EPISODES} from an IL actor, 0 from a random one)")
     p.add_argument("--save-every", type=int, default=50, help="checkpoint every N episodes")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_train)

@@ -18,6 +18,14 @@ Deviations from the paper, and why:
   clipped value loss would follow only slowly); advantages are normalised, so the policy
   gradient does not depend on the scale. Logs keep the unscaled rewards.
 - Discounting is per decision (the paper's approximation γ^{t_k} ≈ γ^k).
+- Critic warm-up (not in the paper): with an IL initialisation the actor starts good and the critic
+  random, and PPO's first updates would follow the random critic's advantages away from the IL
+  policy. For the first ``critic_warmup_episodes`` the actor's learning rate is 0, so only the
+  critic learns (on roll-outs of the IL policy itself); those episodes count in the budget.
+
+rsl-rl's ``OnPolicyRunner.learn`` drives the iterations (roll-out, returns, update); the run's own
+bookkeeping (episode CSV, per-iteration losses, checkpoints, the warm-up switch, the episode budget)
+happens after each iteration in :class:`RunLogger`, rsl-rl's logger with one hook.
 """
 
 from __future__ import annotations
@@ -33,11 +41,12 @@ from typing import Any
 import torch
 from rsl_rl.algorithms import PPO
 from rsl_rl.utils import resolve_optimizer
+from rsl_rl.utils.logger import Logger
 
 from hbmp_bench.training.checkpoints import load_checkpoint, policy_only, save_checkpoint
 from hbmp_bench.training.models import behavior_model_cfgs, control_model_cfgs, observation_shapes
 from hbmp_bench.training.run import Progress, RunConfig, episode_row, final_results, progress_bar
-from hbmp_bench.training.runlog import EPISODE_COLUMNS, CsvLog, plot_run, write_model_card
+from hbmp_bench.training.runlog import EPISODE_COLUMNS, ITERATION_COLUMNS, CsvLog, plot_run, write_model_card
 from hbmp_bench.training.worker import WorkerEnvConfig
 
 MASK_GROUP = "action_mask"
@@ -61,10 +70,19 @@ class TwoRatePPO(PPO):
             raise ValueError("give actor_learning_rate and critic_learning_rate instead of learning_rate")
         super().__init__(actor, critic, storage, learning_rate=actor_learning_rate, optimizer=optimizer,
                          schedule="fixed", **kwargs)
+        self.actor_learning_rate = actor_learning_rate
         self.optimizer = resolve_optimizer(optimizer)([
             {"params": list(self.actor.parameters()), "lr": actor_learning_rate},
             {"params": list(self.critic.parameters()), "lr": critic_learning_rate},
         ])
+
+    def freeze_actor(self, frozen: bool) -> None:
+        """Actor learning rate 0 (critic warm-up) or ``actor_learning_rate``; the critic's is unchanged."""
+        self.optimizer.param_groups[0]["lr"] = 0.0 if frozen else self.actor_learning_rate
+
+    @property
+    def actor_frozen(self) -> bool:
+        return self.optimizer.param_groups[0]["lr"] == 0.0
 
 
 @dataclass(frozen=True)
@@ -82,6 +100,8 @@ class PPOConfig:
         reward_scale: factor on the training reward (see the module notes).
         mask_actions: mask infeasible behaviors in the policy (see :mod:`hbmp_bench.training.models`).
         init_std: initial standard deviation of the flat baseline's Gaussian controls.
+        critic_warmup_episodes: episodes at the start of a run during which only the critic
+            learns (the actor's learning rate is 0); see the module notes.
     """
 
     actor_learning_rate: float = 1e-4
@@ -98,6 +118,7 @@ class PPOConfig:
     reward_scale: float = 0.01
     mask_actions: bool = False
     init_std: float = 0.5
+    critic_warmup_episodes: int = 0
 
     def __post_init__(self):
         for name in ("actor_learning_rate", "critic_learning_rate", "clip_param", "reward_scale", "init_std"):
@@ -107,6 +128,14 @@ class PPOConfig:
             raise ValueError("gamma must be in (0, 1] and lam in [0, 1]")
         if self.mini_batch_size < 1 or self.num_steps_per_env < 1 or self.num_learning_epochs < 1:
             raise ValueError("mini_batch_size, num_steps_per_env and num_learning_epochs must be >= 1")
+        if self.critic_warmup_episodes < 0:
+            raise ValueError(f"critic_warmup_episodes must be >= 0, got {self.critic_warmup_episodes}")
+
+    @classmethod
+    def from_options(cls, options: dict[str, Any]) -> PPOConfig:
+        """The config a run recorded (its ``ppo.*`` options); fields it did not record keep their defaults."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k[4:]: v for k, v in options.items() if k.startswith("ppo.") and k[4:] in names})
 
     def runner_cfg(self, num_envs: int, obs_groups: dict[str, list[str]], actor: dict, critic: dict) -> dict:
         """The ``train_cfg`` dict of rsl-rl's ``OnPolicyRunner`` (a fresh dict: the runner mutates it)."""
@@ -135,6 +164,24 @@ class PPOConfig:
             "actor": dict(actor),
             "critic": dict(critic),
         }
+
+
+class BudgetReached(Exception):
+    """Raised by :class:`RunLogger` after the iteration that completes the episode budget: rsl-rl's
+    ``learn`` has no stop hook, and its iteration count cannot be known in advance (episodes vary)."""
+
+
+class RunLogger(Logger):
+    """rsl-rl's logger (no writer) that calls ``on_iteration(loss_dict)`` after every iteration."""
+
+    def __init__(self, runner, on_iteration):
+        super().__init__(log_dir=None, cfg=runner.cfg, env_cfg=runner.env.cfg, num_envs=runner.env.num_envs,
+                         is_distributed=False, gpu_world_size=1, gpu_global_rank=0, device=runner.device)
+        self.on_iteration = on_iteration
+
+    def log(self, it: int, *args, loss_dict: dict | None = None, **kwargs) -> None:
+        super().log(it, *args, loss_dict=loss_dict, **kwargs)
+        self.on_iteration(loss_dict or {})
 
 
 def input_groups(obs) -> list[str]:
@@ -172,14 +219,15 @@ def check_init_compatible(init: dict, info: dict) -> None:
         warnings.warn(f"--init policy was trained on {their_obs} M_t, this run uses {ours_obs}", stacklevel=2)
 
 
-def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig, init: str | None = None,
+def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None = None, init: str | None = None,
               init_label: str | None = None) -> dict[str, Any]:
     """Train ``run.kind`` (hbmp, hbmp-s or flat) with rsl-rl PPO until ``run.episodes`` episodes.
 
     Args:
         run: budget, workers, seed, folder, resume.
         env_config: environment and reward of the workers (``reward_scale`` is taken from ``ppo``).
-        ppo: hyper-parameters.
+        ppo: hyper-parameters (None: the defaults). A resumed run keeps the ones its checkpoint
+            recorded (a warning names any given here that differ).
         init: checkpoint whose actor initialises the policy (an ``il`` one for hbmp), or None.
         init_label: how the model card and checkpoint name ``init`` (default: the path itself),
             e.g. ``il`` for the shipped checkpoint.
@@ -189,8 +237,15 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig, init:
     """
     if run.kind == "il":
         raise ValueError("train il with hbmp_bench.training.dagger.train_dagger")
-    env_config = dataclasses.replace(env_config, reward_scale=ppo.reward_scale, expert_labels=False)
     resume = load_checkpoint(run.resume, kinds=(run.kind,)) if run.resume else None
+    if resume is not None:
+        recorded = PPOConfig.from_options(resume["train"])
+        if ppo is not None and recorded != ppo:
+            changed = {k: v for k, v in dataclasses.asdict(ppo).items() if dataclasses.asdict(recorded)[k] != v}
+            warnings.warn(f"resuming with the run's recorded PPO options, not {changed}", stacklevel=2)
+        ppo = recorded
+    ppo = ppo or PPOConfig()
+    env_config = dataclasses.replace(env_config, reward_scale=ppo.reward_scale, expert_labels=False)
     init_ckpt = load_checkpoint(init, kinds=("il", "hbmp", "hbmp-s")) if init and resume is None else None
     progress = Progress.from_dict(resume["progress"]) if resume else Progress()
     if progress.episodes >= run.episodes:
@@ -202,7 +257,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig, init:
     from rsl_rl.runners import OnPolicyRunner
 
     env = run.vec_env(env_config, seed=run.seed * 1_000_003 + progress.episodes)
-    log = bar = None
+    log = iterations = bar = None
     try:
         from gymnasium import spaces
 
@@ -234,27 +289,47 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig, init:
                     "progress": progress.to_dict(), "train": {"command": run.command, "seed": run.seed, **options}}
 
         log = CsvLog(run.path("episodes.csv"), EPISODE_COLUMNS, keep_through=progress.episodes if resume else None)
+        iterations = CsvLog(run.path("iterations.csv"), ITERATION_COLUMNS,
+                            keep_through=progress.iterations if resume else None, key="iteration")
         bar = progress_bar(run, progress.episodes)
         last_save = progress.episodes
-        while progress.episodes < run.episodes:
-            runner.learn(num_learning_iterations=1)
+        alg.freeze_actor(progress.episodes < ppo.critic_warmup_episodes)
+
+        def after_iteration(losses: dict[str, float]) -> None:
+            nonlocal last_save
             progress.iterations += 1
             progress.decisions += cfg["num_steps_per_env"] * env.num_envs
+            frozen = alg.actor_frozen
             for worker, summary in env.pop_episodes():
                 if progress.episodes >= run.episodes:
                     break
                 log.write(episode_row(progress, worker, summary))
                 bar.update(1)
+            iterations.write({"iteration": progress.iterations, "episode": progress.episodes,
+                              "decisions": progress.decisions, "actor_frozen": frozen,
+                              **{k: losses.get(k, "") for k in ("value", "surrogate", "entropy")},
+                              "wall_s": progress.to_dict()["wall_s"]})
+            alg.freeze_actor(progress.episodes < ppo.critic_warmup_episodes)
             if progress.episodes - last_save >= run.save_every:
                 save_checkpoint(run.path("checkpoint.pt"), checkpoint())
                 last_save = progress.episodes
+            if progress.episodes >= run.episodes:
+                raise BudgetReached
+
+        runner.logger = RunLogger(runner, after_iteration)
+        runner.current_learning_iteration = progress.iterations
+        try:
+            runner.learn(num_learning_iterations=10**9)
+        except BudgetReached:
+            pass
         final = checkpoint()
         save_checkpoint(run.path("checkpoint.pt"), final)
         save_checkpoint(run.path("policy.pt"), policy_only(final))
     finally:
         env.close()
-        if log is not None:
-            log.close()
+        for csv_log in (log, iterations):
+            if csv_log is not None:
+                csv_log.close()
         if bar is not None:
             bar.close()
     plot_run(run.out, f"{run.kind} ({env_config.reward} reward)")

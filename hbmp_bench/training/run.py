@@ -3,6 +3,7 @@
 Folder of a run (``out``):
     episodes.csv     one row per finished episode (see :mod:`hbmp_bench.training.runlog`)
     rounds.csv       DAgger only: loss and agreement with the expert per training round
+    iterations.csv   PPO only: losses per rsl-rl iteration and whether the actor was frozen (warm-up)
     checkpoint.pt    latest full checkpoint (weights + optimizer), for ``--resume``
     dataset.npz      DAgger only: the aggregated dataset, for ``--resume``
     policy.pt        the final policy without optimizer state (what ships in the package)

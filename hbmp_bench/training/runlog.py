@@ -18,18 +18,21 @@ import numpy as np
 EPISODE_COLUMNS = ("episode", "worker", "r_T", "r_T_plus_r_t", "train_return", "success", "infractions", "length",
                    "end_reason", "route_completion", "sim_time_s", "wall_s")
 DAGGER_COLUMNS = ("beta", "expert_share")
+ITERATION_COLUMNS = ("iteration", "episode", "decisions", "actor_frozen", "value", "surrogate", "entropy", "wall_s")
+"""PPO's ``iterations.csv``: after each rsl-rl iteration, the episodes finished by its end, the losses
+(mean over the update's mini-batches) and whether the actor was frozen (critic warm-up)."""
 ROUND_COLUMNS = ("round", "episodes", "dataset", "holdout", "loss", "train_agreement", "holdout_agreement", "wall_s")
 
 
 class CsvLog:
     """Append-only CSV with a fixed header; reopening an existing file checks the header matches.
 
-    ``keep_through``: on reopening for a resume, drop the rows whose ``episode`` is beyond this
-    number first (they were logged after the checkpoint the run resumes from, and will be run
-    again), so every episode appears once.
+    ``keep_through``: on reopening for a resume, drop the rows whose ``key`` column (``episode``)
+    is beyond this number first (they were logged after the checkpoint the run resumes from, and
+    will be run again), so every episode appears once.
     """
 
-    def __init__(self, path: str, columns: Sequence[str], keep_through: int | None = None):
+    def __init__(self, path: str, columns: Sequence[str], keep_through: int | None = None, key: str = "episode"):
         self.path = path
         self.columns = tuple(columns)
         exists = os.path.isfile(path) and os.path.getsize(path) > 0
@@ -40,7 +43,7 @@ class CsvLog:
                 raise ValueError(f"{path!r} has columns {header}, expected {list(self.columns)}")
             if keep_through is not None:
                 with open(path, newline="") as f:
-                    rows = [r for r in csv.DictReader(f) if int(r["episode"]) <= keep_through]
+                    rows = [r for r in csv.DictReader(f) if int(r[key]) <= keep_through]
                 tmp = path + ".tmp"
                 with open(tmp, "w", newline="") as f:
                     writer = csv.DictWriter(f, fieldnames=self.columns)

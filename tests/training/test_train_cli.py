@@ -63,26 +63,37 @@ def test_il_run_writes_log_checkpoint_curves_and_card(il_run):
     _acts(os.path.join(il_run, "policy.pt"))
 
 
-def test_hbmp_from_il_learns_and_resumes(il_run, tmp_path):
+def test_hbmp_from_il_warms_up_the_critic_learns_and_resumes(il_run, tmp_path):
     out = str(tmp_path / "hbmp")
     il_policy = os.path.join(il_run, "policy.pt")
     assert main(["train", "hbmp", "--episodes", "2", "--workers", "1", "--out", out, "--init", il_policy,
-                 *COMMON]) == 0
+                 "--critic-warmup", "2", *COMMON]) == 0
     _files_of_a_run(out, 2)
     first = torch.load(os.path.join(out, "checkpoint.pt"), weights_only=True)
     il = torch.load(il_policy, weights_only=True)
     assert first["kind"] == "hbmp" and first["train"]["reward"] == "dense" and first["train"]["init"] == il_policy
-    assert any(not torch.equal(il["actor_state_dict"][k], v) for k, v in first["actor_state_dict"].items()), \
-        "PPO changed the IL-initialised policy"
+    assert first["train"]["ppo.critic_warmup_episodes"] == 2
+    assert all(torch.equal(il["actor_state_dict"][k], v) for k, v in first["actor_state_dict"].items()), \
+        "during the critic warm-up the IL actor does not move"
+    iterations = read_csv(os.path.join(out, "iterations.csv"))
+    assert iterations["iteration"].tolist() == list(range(1, first["progress"]["iterations"] + 1))
+    assert (iterations["actor_frozen"] == 1).all() and iterations["value"].max() > 0, "the critic learns"
     _acts(os.path.join(out, "policy.pt"))
 
+    # the resume keeps the recorded warm-up (2 episodes, over): the actor learns from episode 3 on
     assert main(["train", "hbmp", "--episodes", "3", "--workers", "1", "--out", out,
                  "--resume", os.path.join(out, "checkpoint.pt"), *COMMON]) == 0
     second = torch.load(os.path.join(out, "checkpoint.pt"), weights_only=True)
     assert second["progress"]["episodes"] == 3 and second["progress"]["iterations"] > first["progress"]["iterations"]
+    assert second["train"]["ppo.critic_warmup_episodes"] == 2
     assert read_csv(os.path.join(out, "episodes.csv"))["episode"].tolist() == [1, 2, 3]
+    assert any(not torch.equal(first["actor_state_dict"][k], v) for k, v in second["actor_state_dict"].items()), \
+        "PPO changed the IL-initialised policy after the warm-up"
     assert any(not torch.equal(first["critic_state_dict"][k], v) for k, v in second["critic_state_dict"].items()), \
         "the value network kept learning after the resume"
+    iterations = read_csv(os.path.join(out, "iterations.csv"))
+    assert iterations["iteration"].tolist() == list(range(1, second["progress"]["iterations"] + 1))
+    assert iterations["actor_frozen"][-1] == 0
 
     assert main(["curves", il_run, out, "--labels", "il", "hbmp", "--out", str(tmp_path / "fig.png")]) == 0
     assert os.path.getsize(tmp_path / "fig.png") > 1000
