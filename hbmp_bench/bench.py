@@ -1,6 +1,6 @@
 """Throughput of the package against raw SUMO and highway-env, measured in one run.
 
-``hbmp-bench bench [--json] [--quick] [--check] [--out FILE] [--profile N]`` (also
+``hbmp-bench bench [--json] [--quick] [--check] [--out FILE] [--profile N [--town T]]`` (also
 ``benchmarks/throughput.py``). It exits 0 after printing; with ``--check``, 1 when a target fails.
 
 What is measured, on the same scenario and traffic (``corl2017`` NavigationDynamic episode 0 of
@@ -593,23 +593,53 @@ def write_json(result: dict, path: str | Path) -> Path:
     return path
 
 
+NESTED_PARTS = {"planner": "driver_before_step"}
+"""Timed parts of :func:`_instrumented` that run inside another timed part (part: the one it runs in)."""
+
+
+def step_breakdown(env_row: dict, raw_row: dict) -> str:
+    """The timed parts of a continuous env run as shares of a sim step (plain text).
+
+    ``env_row``: a :func:`measure_env` result; ``raw_row``: :func:`measure_raw_sumo` of the same town in the
+    same run. Per part: calls, mean ms per call, that in raw SUMO steps, ms per sim step and its share of the
+    env's step wall time (the driver's control period includes the planner; "other" is the step time no part
+    covers: the env's own loop, pushing the ego pose, rewards)."""
+    raw_ms = 1e3 / raw_row["steps_per_s"]
+    step_ms = 1e3 * env_row["seconds"] / max(env_row["sim_steps"], 1)
+    lines = [f"{env_row['town']} {env_row['fidelity']}: {env_row['sim_steps_per_s']} sim steps/s = "
+             f"{env_row['sim_steps_per_s'] / raw_row['steps_per_s']:.3f} x raw SUMO ({raw_row['steps_per_s']} steps/s); "
+             f"{step_ms:.3f} ms per sim step, raw SUMO step {raw_ms:.3f} ms",
+             f"{'part':20s} {'calls':>7s} {'ms/call':>8s} {'raw steps':>9s} {'ms/step':>8s} {'share':>6s}"]
+    covered = 0.0
+    for name, lat in env_row["latency"].items():
+        share = env_row["time_share"][name]
+        covered += 0.0 if name in NESTED_PARTS else share
+        per_call = lat["mean_ms"] or 0.0
+        lines.append(f"{name:20s} {lat['n']:7d} {per_call:8.3f} {per_call / raw_ms:9.2f} {share * step_ms:8.3f} {share:6.1%}")
+    lines.append(f"{'other':20s} {'':7s} {'':8s} {'':9s} {(1 - covered) * step_ms:8.3f} {1 - covered:6.1%}")
+    return "\n".join(lines)
+
+
 def profile_continuous(cfg: BenchConfig, town: str, seconds: float, top: int = 25) -> str:
-    """cProfile of the continuous env's step path (expert agent) for ``seconds``; top functions by own time."""
+    """The continuous env's step path (expert agent) for ``seconds``: :func:`step_breakdown` against raw SUMO
+    measured in the same run, then cProfile's top functions by own time (the breakdown is timed under the
+    profiler, which inflates Python-heavy parts; compare its shares, not its absolute times)."""
     warm_up_kernels()  # the compile is not the step path
+    raw = measure_raw_sumo(cfg, town)
     profiler = cProfile.Profile()
     profiler.enable()
-    measure_env(cfg, town, "continuous", seconds=seconds)
+    row = measure_env(cfg, town, "continuous", seconds=seconds)
     profiler.disable()
     out = io.StringIO()
     pstats.Stats(profiler, stream=out).sort_stats("tottime").print_stats(top)
-    return out.getvalue()
+    return step_breakdown(row, raw) + "\n" + out.getvalue()
 
 
 # --------------------------------------------------------------------- CLI
 def _cmd_bench(args: argparse.Namespace) -> int:
     cfg = BenchConfig.quick() if args.quick else BenchConfig()
     if args.profile:
-        print(profile_continuous(cfg, cfg.towns[0], args.profile))
+        print(profile_continuous(cfg, args.town or cfg.towns[0], args.profile))
         return 0
     result = run_benchmark(cfg, progress=not args.json)
     if args.out:
@@ -630,5 +660,7 @@ def add_commands(subparsers) -> None:
     p.add_argument("--check", action="store_true", help="exit 1 when a target fails (without it: 0 after printing)")
     p.add_argument("--out", default=None, help="also write the JSON result to this file")
     p.add_argument("--profile", type=float, default=0.0, metavar="SECONDS",
-                   help="instead: cProfile the continuous env's step path for SECONDS and print the top costs")
+                   help="instead: time the parts of the continuous env's step against raw SUMO and cProfile it "
+                        "for SECONDS; print both")
+    p.add_argument("--town", default=None, help="the town of --profile (default: the first measured town)")
     p.set_defaults(func=_cmd_bench)

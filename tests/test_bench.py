@@ -140,3 +140,16 @@ def test_planner_is_compiled_before_the_first_timed_call(monkeypatch):
     assert first == "warm-up" and compiled >= 1
     assert timed and len(timed) == row["latency"]["planner"]["n"]
     assert {n for _, n in timed} == {compiled} == {len(rollout.roll_out.signatures)}  # no timed call compiled
+
+
+def test_step_breakdown_counts_a_nested_part_once():
+    lat = lambda n, ms: {"n": n, "median_ms": ms, "p95_ms": ms, "mean_ms": ms}  # noqa: E731
+    env = {"town": "Town01", "fidelity": "continuous", "seconds": 1.0, "sim_steps": 400, "sim_steps_per_s": 400.0,
+           "latency": {"sumo_step": lat(400, 0.5), "driver_before_step": lat(400, 1.0), "planner": lat(400, 0.75)},
+           "time_share": {"sumo_step": 0.2, "driver_before_step": 0.4, "planner": 0.3}}
+    text = bench.step_breakdown(env, {"steps_per_s": 4000.0})
+    assert "0.100 x raw SUMO" in text and "2.500 ms per sim step" in text
+    planner = next(line for line in text.splitlines() if line.startswith("planner")).split()
+    assert planner[3] == "3.00"  # 0.75 ms per call = 3 raw SUMO steps of 0.25 ms
+    other = next(line for line in text.splitlines() if line.startswith("other")).split()
+    assert other[-1] == "40.0%"  # 1 - 0.2 - 0.4: the planner runs inside the driver's period
