@@ -118,18 +118,18 @@ def test_bench_check_exits_1_on_a_failed_target_and_0_without_check(monkeypatch,
 
 @pytest.mark.slow
 def test_planner_is_compiled_before_the_first_timed_call(monkeypatch):
-    from hbmp_bench.planning import rollout
+    from hbmp_bench.planning import plan_kernel
 
     events = []
     warm_up = bench.warm_up_kernels
 
     def recorded_warm_up():
         seconds = warm_up()
-        events.append(("warm-up", len(rollout.roll_out.signatures)))
+        events.append(("warm-up", len(plan_kernel.plan_samples.signatures)))
         return seconds
 
     def recorded_plan(*args, **kwargs):
-        events.append(("plan", len(rollout.roll_out.signatures)))  # compiled signatures when this timed call starts
+        events.append(("plan", len(plan_kernel.plan_samples.signatures)))  # compiled signatures when this timed call starts
         return plan(*args, **kwargs)
 
     plan = executor_module.plan
@@ -139,7 +139,7 @@ def test_planner_is_compiled_before_the_first_timed_call(monkeypatch):
     (first, compiled), timed = events[0], events[1:]
     assert first == "warm-up" and compiled >= 1
     assert timed and len(timed) == row["latency"]["planner"]["n"]
-    assert {n for _, n in timed} == {compiled} == {len(rollout.roll_out.signatures)}  # no timed call compiled
+    assert {n for _, n in timed} == {compiled} == {len(plan_kernel.plan_samples.signatures)}  # no timed call compiled
 
 
 def test_step_breakdown_counts_a_nested_part_once():

@@ -8,6 +8,7 @@ Modules:
     planner    -- sampling planner :func:`plan` with the paper's costs.
     rollout    -- its closed-loop roll-out, compiled with numba.
     obstacle_kernels -- its obstacle cost and collision check, compiled with numba.
+    plan_kernel -- one planning call (samples, roll-out, obstacle stage) as one compiled kernel.
     vehicle    -- kinematic bicycle model with actuator limits.
     tracking   -- PID speed + pure-pursuit steering tracker.
     executor   -- :class:`BehaviorExecutor` (replan + track until the behavior ends).

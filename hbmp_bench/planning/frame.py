@@ -86,7 +86,7 @@ class Path:
 
     __slots__ = (
         "xy", "s", "heading", "kappa",
-        "_x0", "_y0", "_tx", "_ty", "_seg_len", "_lo", "_hi", "_dh", "_dk", "_uniform",
+        "_x0", "_y0", "_tx", "_ty", "_seg_len", "_lo", "_hi", "_dh", "_dk", "_uniform", "_segments",
     )
 
     def __init__(self, xy, *, s_start: float = 0.0, smooth: int = 2, min_spacing: float = 1e-3,
@@ -153,6 +153,8 @@ class Path:
         self._x0 = _readonly(xy[:-1, 0])
         self._y0 = _readonly(xy[:-1, 1])
         self._uniform: UniformSegments | None = None
+        self._segments = (self.s, self._x0, self._y0, self._tx, self._ty, self._seg_len, self.heading, self.kappa,
+                          self._dh, self._dk)
 
     @classmethod
     def _from_arrays(cls, xy, s, heading, kappa) -> Path:
@@ -296,6 +298,13 @@ class Path:
         i0 = int(self._segment_of(lo))
         i1 = int(self._segment_of(hi))
         return np.arange(i0, i1 + 1)[None, :]
+
+    def segment_arrays(self) -> tuple[np.ndarray, ...]:
+        """``(s, x0, y0, tx, ty, chord, heading, kappa, dh, dk)``, what the compiled planner reads
+        (:func:`.plan_kernel.plan_samples`): vertex arc length [m], heading [rad] and curvature [1/m] (N,);
+        segment start [m], unit tangent, chord [m] and the change of heading and curvature along it (N - 1,).
+        Read-only views of the path's own arrays."""
+        return self._segments
 
     def uniform_segments(self) -> UniformSegments:
         """Segment arrays for the compiled roll-out (:func:`.rollout.roll_out`).

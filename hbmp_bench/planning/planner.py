@@ -56,10 +56,13 @@ prediction along their heading) at every future step: bounding-circle broad phas
 (per-step sample bounding box, then per sample) followed by an exact separating-axis test
 on the candidate pairs. A sample that touches an obstacle is infeasible.
 
-The obstacle stage (``c_obs`` and the collision check) runs compiled
-(:mod:`.obstacle_kernels`); :func:`obstacle_cost_reference` and :func:`collisions_reference` are
-its numpy form, which the tests hold it to: the same collisions, ``c_obs`` within 5e-6
-relative (the reference sums in float32), the same chosen trajectory on recorded problems. The cheapest
+Compiled: :func:`plan` runs the samples, roll-outs, ``c_obs`` and collision check in one numba
+kernel (:func:`.plan_kernel.plan_samples`, which calls :mod:`.rollout` and :mod:`.obstacle_kernels`);
+``c_velocity``, ``c_dist`` and the choice stay numpy. :func:`plan_reference` is the same call in numpy
+around the roll-out and obstacle kernels; the tests hold the two to equal arrays, bit for bit. The
+obstacle kernels' own numpy form is :func:`obstacle_cost_reference` and :func:`collisions_reference`:
+the same collisions, ``c_obs`` within 5e-6 relative (the reference sums in float32), the same chosen
+trajectory on recorded problems. The cheapest
 feasible sample is chosen (ties within ``tie_tolerance`` go to the sample nearest the
 nominal one); if none is feasible, ``collision_free`` is False and the chosen sample is the cheapest one
 (``infeasible_fallback="min_cost"``, default) or the full brake (``"brake"``); the full
@@ -79,7 +82,8 @@ from .control import control_law, linear_speed_profile, omega_limit
 from .frame import Path
 from .state import Obstacles, VehicleState
 
-__all__ = ["PlannerConfig", "PlanningProblem", "PlanResult", "plan", "compile_kernels", "COST_NAMES"]
+__all__ = ["PlannerConfig", "PlanningProblem", "PlanResult", "plan", "plan_reference", "compile_kernels",
+           "COST_NAMES"]
 
 #: Column names of :attr:`PlanResult.costs`.
 COST_NAMES = ("velocity", "dist", "obs")
@@ -312,6 +316,8 @@ class _Layout(NamedTuple):
     dw: np.ndarray  # (n_omega,) offsets of omega(0) from omega_nom [rad/s]
     dec: np.ndarray  # (S,) deceleration of each sample's speed profile [m/s^2]
     t2: np.ndarray  # (T - 1,) squared future times [s^2]
+    t2_sum: float  # sum of t2 [s^2]
+    params: np.ndarray  # (23,) the scalars :func:`.plan_kernel.plan_samples` reads (:func:`kernel_params`)
     hold: int  # steps the omega(0) offset is held
 
 
@@ -325,11 +331,27 @@ def _layout(cfg: PlannerConfig) -> _Layout:
         dw=_spread(-cfg.omega_spread, cfg.omega_spread, cfg.n_omega),
         dec=np.concatenate([np.full(n_grid, cfg.decel), [cfg.decel, cfg.brake_decel]]),
         t2=times[1:] ** 2,
+        t2_sum=float((times[1:] ** 2).sum()),
+        params=kernel_params(cfg),
         hold=max(1, round(cfg.omega_hold / cfg.dt)),
     )
-    for a in layout[:-1]:
-        a.setflags(write=False)
+    for a in layout:
+        if isinstance(a, np.ndarray):
+            a.setflags(write=False)
     return layout
+
+
+def kernel_params(cfg: PlannerConfig) -> np.ndarray:
+    """(23,) the config's scalars in the order :func:`.plan_kernel.plan_samples` unpacks them: ``dt, n_v,
+    n_omega, hold, horizon, accel, decel, yaw_rate_max, max_curvature, lat_accel_max, k_theta, k_e,
+    gain_speed, kappa_obs, sigma_obs, length, width, safety_margin, path_resolution, curve_lat_accel``, the
+    two tie-breaking scales of ``dev`` [rad/s, m/s] and :data:`OBS_EXPONENT_CUTOFF`."""
+    return np.array([
+        cfg.dt, cfg.n_v, cfg.n_omega, max(1, round(cfg.omega_hold / cfg.dt)), cfg.horizon, cfg.accel, cfg.decel,
+        cfg.yaw_rate_max, cfg.max_curvature, cfg.lat_accel_max, cfg.k_theta, cfg.k_e, cfg.gain_speed,
+        cfg.kappa_obs, cfg.sigma_obs, cfg.length, cfg.width, cfg.safety_margin, cfg.path_resolution,
+        cfg.curve_lat_accel, max(cfg.omega_spread, 1e-9), max((cfg.accel + cfg.decel) * cfg.v_window_time, 1e-9),
+        OBS_EXPONENT_CUTOFF], dtype=np.float64)
 
 
 def _sat_overlap(dx, dy, ce, se, hl_e, hw_e, co, so, hl_o, hw_o):
@@ -503,7 +525,50 @@ def curve_speed_cap(path: Path, s0: float, v: float, cfg: PlannerConfig) -> floa
 
 
 def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResult:
-    """Sample, roll out, score and choose a trajectory (see the module docstring)."""
+    """Sample, roll out, score and choose a trajectory (see the module docstring).
+
+    Compiled: :func:`.plan_kernel.plan_samples` builds the samples, rolls them out and runs the obstacle
+    stage in one call; ``c_velocity``, ``c_dist`` and the choice are the numpy of :func:`plan_reference`,
+    whose results this gives bit for bit.
+    """
+    from .plan_kernel import plan_samples  # numba loads on the first call
+
+    cfg = PlannerConfig() if cfg is None else cfg
+    layout = _layout(cfg)
+    ego, path, obs = problem.ego, problem.path, problem.obstacles
+    ps, x0, y0, tx, ty, chord, heading, kappa, dh, dk = path.segment_arrays()
+    traj, omega, frenet, V, c_obs, hit, dev, v_ref = plan_samples(
+        float(ego.x), float(ego.y), float(ego.yaw), float(ego.v),
+        np.nan if problem.s_hint is None else float(problem.s_hint), float(problem.v_ref), float(problem.speed_limit),
+        ps, x0, y0, tx, ty, chord, heading, kappa, dh, dk,
+        obs.x, obs.y, obs.yaw, obs.v, obs.length, obs.width,
+        layout.times, layout.dv, layout.dw, layout.dec, layout.params)
+    Vf = V[:, 1:]
+    c_vel = (np.abs(v_ref - Vf) @ layout.t2) / layout.t2_sum
+    c_dist = 1.0 / (1.0 + np.abs(Vf).sum(axis=1))
+    return _choose(cfg, layout.times, traj, omega, frenet, c_vel, c_dist, c_obs, ~hit, dev, v_ref)
+
+
+def _choose(cfg: PlannerConfig, times, trajectories, omega, frenet, c_vel, c_dist, c_obs, feasible, dev,
+            v_ref) -> PlanResult:
+    """The cheapest feasible sample (ties to the nearest the nominal one; see the module docstring)."""
+    total = cfg.w_velocity * c_vel + cfg.w_dist * c_dist + cfg.w_obs * c_obs
+    brake_index = len(total) - 1
+    any_feasible = feasible.any()
+    if any_feasible or cfg.infeasible_fallback == "min_cost":
+        cand = np.where(feasible, total, np.inf) if any_feasible else total
+        tied = cand <= cand.min() + cfg.tie_tolerance
+        chosen = int(np.argmin(np.where(tied, dev, np.inf)))
+    else:
+        chosen = brake_index
+    return PlanResult(times=times, trajectories=trajectories, omega=omega, frenet=frenet,
+                      costs=np.stack([c_vel, c_dist, c_obs], axis=1), total=total, feasible=feasible, chosen=chosen,
+                      collision_free=bool(feasible[chosen]), brake_index=brake_index, v_ref=float(v_ref))
+
+
+def plan_reference(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResult:
+    """:func:`plan` in numpy around the compiled roll-out and obstacle kernels: the form :func:`plan`'s
+    single kernel was written from, which the tests hold it to (equal arrays, the same choice)."""
     cfg = PlannerConfig() if cfg is None else cfg
     ego, path = problem.ego, problem.path
     dt = cfg.dt
@@ -530,7 +595,6 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
     dev = (np.abs(W0 - w_nom) / max(cfg.omega_spread, 1e-9)
            + np.abs(V0 - v) / max((cfg.accel + cfg.decel) * cfg.v_window_time, 1e-9))
     dev[n_grid:] = (1e6, 2e6)  # braking samples: only when strictly cheapest
-    S = len(V0)
     lim = omega_limit(V, cfg.yaw_rate_max, cfg.max_curvature, cfg.lat_accel_max)
     # gain schedule above gain_speed: k_theta ~ 1/|v|, k_e ~ 1/v^2 (same damping ratio)
     gsc = np.minimum(1.0, cfg.gain_speed / np.maximum(np.abs(V), 1e-9))
@@ -554,47 +618,24 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
         *lp.uniform_segments())  # (T, S) time-major
 
     # ---- costs
-    t2 = layout.t2
     Vf = V[:, 1:]
-    c_vel = (np.abs(v_ref - Vf) @ t2) / t2.sum()
+    c_vel = (np.abs(v_ref - Vf) @ layout.t2) / layout.t2_sum
     c_dist = 1.0 / (1.0 + np.abs(Vf).sum(axis=1))
     obs = problem.obstacles
     future = times[1:]
     c_obs = _obstacle_cost(SS[1:], EE[1:], obs, lp, future, cfg)
-    costs = np.stack([c_vel, c_dist, c_obs], axis=1)
-    total = cfg.w_velocity * c_vel + cfg.w_dist * c_dist + cfg.w_obs * c_obs
-
-    # ---- feasibility and choice
     feasible = ~_collisions(X[1:], Y[1:], PSI[1:], obs, future, cfg)
-    brake_index = S - 1
-    if feasible.any() or cfg.infeasible_fallback == "min_cost":
-        cand = np.where(feasible, total, np.inf) if feasible.any() else total
-        tied = cand <= cand.min() + cfg.tie_tolerance
-        chosen = int(np.argmin(np.where(tied, dev, np.inf)))
-    else:
-        chosen = brake_index
-    return PlanResult(
-        times=times,
-        trajectories=np.stack([X.T, Y.T, PSI.T, V], axis=2),
-        omega=np.ascontiguousarray(W.T),
-        frenet=np.stack([SS.T, EE.T], axis=2),
-        costs=costs,
-        total=total,
-        feasible=feasible,
-        chosen=chosen,
-        collision_free=bool(feasible[chosen]),
-        brake_index=brake_index,
-        v_ref=float(v_ref),
-    )
+    return _choose(cfg, times, np.stack([X.T, Y.T, PSI.T, V], axis=2), np.ascontiguousarray(W.T),
+                   np.stack([SS.T, EE.T], axis=2), c_vel, c_dist, c_obs, feasible, dev, v_ref)
 
 
 def compile_kernels(cfg: PlannerConfig | None = None) -> None:
-    """Compile the roll-out and the obstacle kernels (or load them from numba's on-disk cache)
-    before :func:`plan` is timed.
+    """Compile the planning kernel (:func:`.plan_kernel.plan_samples`, with the roll-out and obstacle
+    kernels it calls) or load it from numba's on-disk cache before :func:`plan` is timed.
 
-    One :func:`plan` on a straight road with one obstacle: ``plan`` passes the roll-out the same
+    One :func:`plan` on a straight road with one obstacle: ``plan`` passes the kernel the same
     argument types whatever the problem, so this compiles the one signature every later call
-    uses. Without it the first ``plan`` of a process includes the compile (about a second).
+    uses. Without it the first ``plan`` of a process includes the compile (seconds).
     """
     xy = np.column_stack([np.linspace(0.0, 100.0, 51), np.zeros(51)])
     obstacles = np.array([[30.0, 0.0, 0.0, 2.0, 4.5, 1.8]])

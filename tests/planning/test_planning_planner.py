@@ -263,14 +263,14 @@ def test_short_path_is_extended_straight():
 
 
 def test_compile_kernels_compiles_the_signature_every_plan_uses():
-    from hbmp_bench.planning import rollout
+    from hbmp_bench.planning import plan_kernel
     from hbmp_bench.planning.planner import compile_kernels
 
     compile_kernels()
-    compiled = list(rollout.roll_out.signatures)
+    compiled = list(plan_kernel.plan_samples.signatures)
     assert len(compiled) == 1
     curved = Path(np.stack([XS, 0.002 * XS**2], axis=1))  # another path, obstacles, ego, config
     plan(PlanningProblem(VehicleState(3, 1, 0.2, 0), curved, v_ref=5, speed_limit=8, obstacles=obstacles(car(20.0))),
          PlannerConfig(n_v=3, n_omega=5, horizon=2.0))
     plan(problem(v_ref=0.0))
-    assert rollout.roll_out.signatures == compiled  # nothing more was compiled
+    assert plan_kernel.plan_samples.signatures == compiled  # nothing more was compiled
