@@ -118,14 +118,16 @@ def test_bench_check_exits_1_on_a_failed_target_and_0_without_check(monkeypatch,
 
 @pytest.mark.slow
 def test_planner_is_compiled_before_the_first_timed_call(monkeypatch):
+    from hbmp_bench.metrics import locate_kernel
     from hbmp_bench.planning import plan_kernel
 
-    events = []
+    events, lookups = [], []
     warm_up = bench.warm_up_kernels
 
     def recorded_warm_up():
         seconds = warm_up()
         events.append(("warm-up", len(plan_kernel.plan_samples.signatures)))
+        lookups.append(len(locate_kernel.locate_points.signatures))
         return seconds
 
     def recorded_plan(*args, **kwargs):
@@ -140,6 +142,7 @@ def test_planner_is_compiled_before_the_first_timed_call(monkeypatch):
     assert first == "warm-up" and compiled >= 1
     assert timed and len(timed) == row["latency"]["planner"]["n"]
     assert {n for _, n in timed} == {compiled} == {len(plan_kernel.plan_samples.signatures)}  # no timed call compiled
+    assert lookups == [1] == [len(locate_kernel.locate_points.signatures)]  # the detectors' lane lookup too
 
 
 def test_step_breakdown_counts_a_nested_part_once():

@@ -157,10 +157,10 @@ class InfractionDetector:
         """Detect this step's events; ``others_*`` are (K,) arrays of the other actors, ``time_s`` [s]."""
         ev = StepEvents()
         heading = np.array([np.cos(ego.yaw), np.sin(ego.yaw)])
-        box = box_corners(ego.xy[None], np.array([ego.yaw]), np.array([ego.length]), np.array([ego.width]))[0]
         near = np.hypot(*(others_xy - ego.xy).T) < (ego.length + others_len) if len(others_ids) else np.zeros(0, bool)
         touching = set()
         if near.any():
+            box = box_corners(ego.xy[None], np.array([ego.yaw]), np.array([ego.length]), np.array([ego.width]))[0]
             idx = np.nonzero(near)[0]
             hit = boxes_overlap(box, box_corners(others_xy[idx], others_yaw[idx], others_len[idx], others_wid[idx]))
             touching = {others_ids[i] for i in idx[hit]}

@@ -178,6 +178,14 @@ class LaneLocator:
         self.junctions = list(net.junction_shapes.values())
         self.junction_lo = np.array([j.min(0) for j in self.junctions]).reshape(-1, 2)
         self.junction_hi = np.array([j.max(0) for j in self.junctions]).reshape(-1, 2)
+        # the compiled lookup's forms of the same data: edges as numbers, junction polygons stacked
+        edges = sorted(set(self.lane_edge.tolist()))
+        self._edge_number = {edge: k for k, edge in enumerate(edges)}
+        self._segment_edge = np.array([self._edge_number[e] for e in self.lane_edge], dtype=np.int64)[self.lane_index]
+        self._junction_xy = np.ascontiguousarray(
+            np.concatenate([np.asarray(j, dtype=float).reshape(-1, 2) for j in self.junctions]) if self.junctions
+            else np.zeros((0, 2)))
+        self._junction_start = np.concatenate([[0], np.cumsum([len(j) for j in self.junctions])]).astype(np.int64)
 
     def stop_line(self, lane_id: str, next_edge: str | None) -> tuple[np.ndarray, np.ndarray, str, int] | None:
         """The signalised stop line at the end of the normal lane ``lane_id`` on the way to ``next_edge``.
@@ -211,7 +219,18 @@ class LaneLocator:
         """For points (P, 2): (lane index into ``lane_names`` or -1, lane direction (P, 2), in_junction (P,) bool).
 
         A point on a lane of ``prefer_edge`` (the ego's own edge) is assigned to it even where another
-        lane lies under it in plan view (a ramp bridging a carriageway)."""
+        lane lies under it in plan view (a ramp bridging a carriageway). Compiled
+        (:func:`.locate_kernel.locate_points`); :meth:`locate_reference` is its numpy form (equal results)."""
+        from hbmp_bench.metrics.locate_kernel import locate_points  # numba loads on the first call
+
+        points = np.ascontiguousarray(points, dtype=float)
+        candidates = self._grid.query(points.min(0), points.max(0))
+        return locate_points(points, candidates, self._bounds, self.a, self.unit, self.seg_len, self.half_width,
+                             self.lane_index, self._segment_edge, self._edge_number.get(prefer_edge, -1) if prefer_edge
+                             else -1, self.junction_lo, self.junction_hi, self._junction_xy, self._junction_start)
+
+    def locate_reference(self, points: np.ndarray, prefer_edge: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`locate` in numpy (what the compiled form is tested against)."""
         p_lo, p_hi = points.min(0), points.max(0)
         candidates = self._grid.query(p_lo, p_hi)
         near = candidates[(self._bounds[candidates] >= np.concatenate([p_lo, -p_hi])).all(axis=1)]

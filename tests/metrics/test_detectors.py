@@ -341,3 +341,26 @@ def test_lane_lookup_agrees_with_a_scan_of_every_segment():
         best = np.argmin(dist, axis=1)
         expect = np.where(np.isfinite(dist.min(axis=1)), LOCATOR.lane_index[best], -1)
         np.testing.assert_array_equal(got[0], expect)
+
+
+@pytest.mark.parametrize("town", ["Town01", "Town03", "Town05"])
+def test_compiled_lane_lookup_equals_its_numpy_form(town):
+    """Lanes, directions and junction flags of footprints on and beside every kind of lane, with and
+    without a preferred edge (the ego's own, another, none): equal arrays."""
+    net = road_network(town)
+    locator = LaneLocator(net)
+    rng = np.random.default_rng(2)
+    lanes = list(net.lanes.values())
+    edges = sorted({lane.edge for lane in lanes})
+    judged = in_junction = 0
+    for k in range(600):
+        lane = lanes[rng.integers(len(lanes))]
+        xy = lane.shape[rng.integers(len(lane.shape))] + rng.normal(0.0, 4.0, 2)
+        points = footprint_points(xy, rng.uniform(-np.pi, np.pi), 4.6, 1.9)
+        prefer = ("", lane.edge, edges[rng.integers(len(edges))])[k % 3]
+        got, expect = locator.locate(points, prefer), locator.locate_reference(points, prefer)
+        for a, b in zip(got, expect):
+            np.testing.assert_array_equal(a, b)
+        judged += (got[0] >= 0).any()
+        in_junction += got[2].any()
+    assert judged > 300 and in_junction > 100
