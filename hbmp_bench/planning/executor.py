@@ -183,7 +183,7 @@ class BehaviorExecutor:
         changes_lane = self.behavior in (Behavior.CHANGE_LEFT, Behavior.CHANGE_RIGHT)
         self.max_duration = self.cfg.max_duration if changes_lane else self.cfg.lane_keeping_max_duration
         self.v_ref = reference_speed(self.behavior, ego.v, speed_limit, self.behavior_cfg)
-        self._s, *_ = self.target.project(ego.xy, ego.yaw)
+        self._s, *_ = self.target.project_pose(ego.x, ego.y, ego.yaw)
         self._plan: PlanResult | None = None
         self._t_since_plan = 0.0
         self.n_steps = 0
@@ -198,7 +198,7 @@ class BehaviorExecutor:
         return self.behavior
 
     def _finished(self, ego: VehicleState) -> str | None:
-        s, e, th, _ = self.target.project(ego.xy, ego.yaw, hint_s=self._s)
+        s, e, th, _ = self.target.project_pose(ego.x, ego.y, ego.yaw, self._s)
         self._s = s
         self.last_errors = (e, th)
         c = self.cfg

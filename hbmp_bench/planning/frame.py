@@ -358,6 +358,15 @@ class Path:
             return s[0], e[0], h[0], k[0]
         return s, e, h, k
 
+    def project_pose(self, x: float, y: float, yaw: float, hint_s: float | None = None):
+        """:meth:`project` of one pose [m, m, rad] with the default window, compiled
+        (:func:`.plan_kernel.project_pose`, numba loads on the first call): the same four floats, to the bit,
+        without ~20 small numpy operations (the executor's finish check runs it every control period)."""
+        from .plan_kernel import project_pose
+
+        return project_pose(float(x), float(y), float(yaw), np.nan if hint_s is None else float(hint_s),
+                            *self._segments)
+
     def project(self, xy, yaw, hint_s=None, window: tuple[float, float] = (10.0, 40.0)):
         """Project poses onto the path (nearest segment).
 

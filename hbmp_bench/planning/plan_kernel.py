@@ -29,7 +29,7 @@ from numba import njit
 from .obstacle_kernels import collisions, obstacle_cost, project_poses
 from .rollout import roll_out
 
-__all__ = ["plan_samples", "pairwise_sum"]
+__all__ = ["plan_samples", "project_pose", "pairwise_sum"]
 
 #: ``np.finfo(float).eps``: ``np.sinc`` evaluates ``sin(y) / y`` at this ``y`` when ``y == 0``.
 _EPS = 2.220446049250313e-16
@@ -120,8 +120,9 @@ def pairwise_sum(a, lo, n):
 
 
 @njit(cache=True, nogil=True)
-def _project_ego(px, py, yaw, hint, ps, x0, y0, tx, ty, chord, heading, kappa, dh, dk):
-    """:meth:`.frame.Path.project` of one pose: ``(s, e, theta_e, kappa)``; ``hint`` NaN = no hint."""
+def project_pose(px, py, yaw, hint, ps, x0, y0, tx, ty, chord, heading, kappa, dh, dk):
+    """:meth:`.frame.Path.project` of one pose [m, m, rad] with its default window: ``(s, e, theta_e,
+    kappa)``; ``hint`` [m], NaN = none; the path as :meth:`.frame.Path.segment_arrays`."""
     nseg = len(chord)
     if math.isnan(hint):
         i0, i1 = 0, nseg - 1
@@ -203,7 +204,7 @@ def plan_samples(x, y, yaw, v, s_hint, v_ref, speed_limit,
     n = T - 1
     lat_finite = math.isfinite(lat_accel_max)
 
-    s0, e0, th0, k0 = _project_ego(x, y, yaw, s_hint, ps, x0, y0, tx, ty, chord, heading, kappa, dh, dk)
+    s0, e0, th0, k0 = project_pose(x, y, yaw, s_hint, ps, x0, y0, tx, ty, chord, heading, kappa, dh, dk)
     cap = _curve_speed_cap(s0, v, ps, chord, kappa, dk, horizon, decel, ds, curve_lat_accel, yaw_rate_max)
     v_ref = cap if cap < v_ref else v_ref
 

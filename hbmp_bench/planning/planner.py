@@ -631,13 +631,15 @@ def plan_reference(problem: PlanningProblem, cfg: PlannerConfig | None = None) -
 
 def compile_kernels(cfg: PlannerConfig | None = None) -> None:
     """Compile the planning kernel (:func:`.plan_kernel.plan_samples`, with the roll-out and obstacle
-    kernels it calls) or load it from numba's on-disk cache before :func:`plan` is timed.
+    kernels it calls) and the executor's pose projection (:meth:`.frame.Path.project_pose`), or load them
+    from numba's on-disk cache, before :func:`plan` is timed.
 
     One :func:`plan` on a straight road with one obstacle: ``plan`` passes the kernel the same
     argument types whatever the problem, so this compiles the one signature every later call
     uses. Without it the first ``plan`` of a process includes the compile (seconds).
     """
-    xy = np.column_stack([np.linspace(0.0, 100.0, 51), np.zeros(51)])
+    path = Path(np.column_stack([np.linspace(0.0, 100.0, 51), np.zeros(51)]))
     obstacles = np.array([[30.0, 0.0, 0.0, 2.0, 4.5, 1.8]])
-    plan(PlanningProblem(ego=VehicleState(10.0, 0.0, 0.0, 5.0), path=Path(xy), v_ref=8.0, speed_limit=10.0,
+    plan(PlanningProblem(ego=VehicleState(10.0, 0.0, 0.0, 5.0), path=path, v_ref=8.0, speed_limit=10.0,
                          obstacles=obstacles), cfg)
+    path.project_pose(10.0, 0.0, 0.0, 10.0)  # the executor's finish check

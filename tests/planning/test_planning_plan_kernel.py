@@ -58,3 +58,14 @@ def test_pairwise_sum_is_numpys():
         assert pairwise_sum(a, 0, n) == np.add.reduce(a)
     a = rng.uniform(0.0, 1.0, 500)
     assert pairwise_sum(a, 7, 300) == np.add.reduce(a[7:307])
+
+
+def test_project_pose_is_the_paths_projection():
+    """The compiled single-pose projection gives Path.project's four floats, with and without a hint, on
+    and off the path, past both ends."""
+    path = corner_path()
+    rng = np.random.default_rng(5)
+    for _ in range(500):
+        x, y, yaw = rng.uniform([-40.0, -20.0, -np.pi], [60.0, 80.0, np.pi])
+        hint = None if rng.random() < 0.3 else float(rng.uniform(-20.0, path.length + 20.0))
+        assert path.project_pose(x, y, yaw, hint) == path.project(np.array([x, y]), yaw, hint_s=hint)
