@@ -11,6 +11,7 @@ Modules:
     plan_kernel -- one planning call (samples, roll-out, obstacle stage) as one compiled kernel.
     vehicle    -- kinematic bicycle model with actuator limits.
     tracking   -- PID speed + pure-pursuit steering tracker.
+    tracking_kernel -- the tracker's look-ahead point and speed look-up, compiled with numba.
     executor   -- :class:`BehaviorExecutor` (replan + track until the behavior ends).
     sim        -- SUMO-free closed loop used by tests.
 

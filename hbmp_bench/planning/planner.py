@@ -631,8 +631,8 @@ def plan_reference(problem: PlanningProblem, cfg: PlannerConfig | None = None) -
 
 def compile_kernels(cfg: PlannerConfig | None = None) -> None:
     """Compile the planning kernel (:func:`.plan_kernel.plan_samples`, with the roll-out and obstacle
-    kernels it calls) and the executor's pose projection (:meth:`.frame.Path.project_pose`), or load them
-    from numba's on-disk cache, before :func:`plan` is timed.
+    kernels it calls) and what else the executor runs compiled (:meth:`.frame.Path.project_pose`, the
+    tracker's :mod:`.tracking_kernel`), or load them from numba's on-disk cache, before :func:`plan` is timed.
 
     One :func:`plan` on a straight road with one obstacle: ``plan`` passes the kernel the same
     argument types whatever the problem, so this compiles the one signature every later call
@@ -640,6 +640,9 @@ def compile_kernels(cfg: PlannerConfig | None = None) -> None:
     """
     path = Path(np.column_stack([np.linspace(0.0, 100.0, 51), np.zeros(51)]))
     obstacles = np.array([[30.0, 0.0, 0.0, 2.0, 4.5, 1.8]])
-    plan(PlanningProblem(ego=VehicleState(10.0, 0.0, 0.0, 5.0), path=path, v_ref=8.0, speed_limit=10.0,
-                         obstacles=obstacles), cfg)
+    ego = VehicleState(10.0, 0.0, 0.0, 5.0)
+    result = plan(PlanningProblem(ego=ego, path=path, v_ref=8.0, speed_limit=10.0, obstacles=obstacles), cfg)
     path.project_pose(10.0, 0.0, 0.0, 10.0)  # the executor's finish check
+    from .tracking import TrajectoryTracker
+
+    TrajectoryTracker().control(ego, result.trajectory, result.times, result.times[1])  # its tracker

@@ -94,8 +94,11 @@ class TrackerConfig:
             raise ValueError(f"TrackerConfig.hold_brake must be in [0, 1], got {self.hold_brake!r}")
 
 
-def _lookahead_point(xy: np.ndarray, p: np.ndarray, dist: float) -> np.ndarray:
-    """Point ``dist`` [m] along polyline ``xy`` (T, 2) from its point closest to ``p``."""
+def lookahead_point_reference(xy: np.ndarray, p: np.ndarray, dist: float) -> np.ndarray:
+    """Point ``dist`` [m] along polyline ``xy`` (T, 2) from its point closest to ``p``.
+
+    The numpy form of the compiled :func:`.tracking_kernel.lookahead_point` that the tracker runs (the tests
+    hold the two to the same floats)."""
     seg = np.diff(xy, axis=0)
     L = np.hypot(seg[:, 0], seg[:, 1])
     keep = L > 1e-6
@@ -144,8 +147,10 @@ class TrajectoryTracker:
         c = self.cfg
         vp = self.vehicle
         ld = min(max(c.lookahead_time * state.v, c.min_lookahead), c.max_lookahead)
-        target = _lookahead_point(np.asarray(trajectory, float)[:, :2], state.xy, ld)
-        dx, dy = target - state.xy
+        from .tracking_kernel import lookahead_point  # numba loads on the first call
+
+        tx, ty = lookahead_point(np.asarray(trajectory, float), state.x, state.y, ld)
+        dx, dy = tx - state.x, ty - state.y
         dist = math.hypot(dx, dy)
         if dist < 1e-6:
             return 0.0
@@ -169,8 +174,10 @@ class TrajectoryTracker:
         times = np.asarray(times, dtype=float)
         vp, c = self.vehicle, self.cfg
         t_des = times[0] + t_offset + c.speed_preview
-        v_des = float(np.interp(t_des, times, traj[:, 3]))
-        a_ff = (float(np.interp(t_des + dt, times, traj[:, 3])) - v_des) / dt if dt > 0 else 0.0
+        from .tracking_kernel import interp  # numba loads on the first call
+
+        v_des = interp(t_des, times, traj[:, 3])
+        a_ff = (interp(t_des + dt, times, traj[:, 3]) - v_des) / dt if dt > 0 else 0.0
         if v_des < 0.05 and state.v < 0.3:
             self.pid.reset()
             throttle, brake = 0.0, c.hold_brake
