@@ -23,8 +23,8 @@ each town, env reset seed 0):
   ``ray`` extra): the training backend's workers.
 - **import**: ``import hbmp_bench`` in a fresh interpreter, best of ``import_repeats`` (``import_s``).
 
-The planner's kernel and the detectors' lane lookup are compiled (or loaded from numba's cache) before
-anything is timed, in this process and in each scaling worker (:func:`warm_up_kernels`): a first call
+The planner's kernels, the detectors' lane lookup and M_t's rasteriser are compiled (or loaded from numba's
+cache) before anything is timed, in this process and in each scaling worker (:func:`warm_up_kernels`): a first call
 would otherwise include the compile.
 
 The targets (:class:`Targets`) are those of the speed issue: continuous ≥ 0.2× raw, event ≥ 0.35×
@@ -261,14 +261,16 @@ def _make_env(cfg: BenchConfig, town: str, fidelity: str, **agent_env: Any):
 
 
 def warm_up_kernels() -> float:
-    """Compile the planner's kernel and the detectors' lane lookup in this process (or load them from numba's
-    cache; a no-op once done); returns the time it took [s]."""
-    from hbmp_bench.metrics.locate_kernel import compile_kernel
+    """Compile the planner's kernels, the detectors' lane lookup and M_t's rasteriser in this process (or load
+    them from numba's cache; a no-op once done); returns the time it took [s]."""
+    from hbmp_bench.envs import occupancy_kernel
+    from hbmp_bench.metrics import locate_kernel
     from hbmp_bench.planning.planner import compile_kernels
 
     t0 = time.perf_counter()
     compile_kernels()
-    compile_kernel()
+    locate_kernel.compile_kernel()
+    occupancy_kernel.compile_kernel()
     return time.perf_counter() - t0
 
 

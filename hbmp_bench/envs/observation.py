@@ -150,22 +150,55 @@ class ObservationBuilder:
         return occupancy_grid(self.config, ego_xy, ego_yaw, path, xy, yaw, length, width)
 
 
+def _footprint_sampling(cfg: ObservationConfig, ego_xy: np.ndarray, xy: np.ndarray, length: np.ndarray,
+                        width: np.ndarray) -> tuple[np.ndarray, int, int] | None:
+    """The actors M_t samples (a (K,) mask) and the sample points along / across each footprint, or None
+    when none is near: samples no farther apart than a cell along both box axes, so no covered cell is
+    skipped."""
+    if len(xy) == 0:
+        return None
+    near = np.hypot(*(xy - ego_xy).T) < cfg.rows * cfg.cell_long_m + 10.0
+    if not near.any():
+        return None
+    step = min(cfg.cell_long_m, cfg.cell_lat_m)
+    n_long = max(10, int(np.ceil(float(length[near].max()) / step)) + 1)
+    n_lat = max(4, int(np.ceil(float(width[near].max()) / step)) + 1)
+    return near, n_long, n_lat
+
+
 def occupancy_grid(cfg: ObservationConfig, ego_xy: np.ndarray, ego_yaw: float, path: Path | None,
                    xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np.ndarray) -> np.ndarray:
     """M_t (1, rows, cols) float32 from geometry alone (any simulator): the ego centre ``ego_xy`` (2,) [m]
     and heading ``ego_yaw`` [rad], the followed-lane centreline ``path`` (needed for ``deformed``,
     ignored for ``vehicle_centric``), and the other actors' footprints: centres ``xy`` (K, 2) [m],
-    headings ``yaw`` (K,) [rad], ``length`` / ``width`` (K,) [m]. Right-handed frame (y left of x)."""
+    headings ``yaw`` (K,) [rad], ``length`` / ``width`` (K,) [m]. Right-handed frame (y left of x).
+
+    The deformed grid is rasterised compiled (:func:`.occupancy_kernel.deformed_grid`, the same cells as
+    :func:`occupancy_grid_reference`, its numpy form)."""
+    if cfg.kind != "deformed":
+        return occupancy_grid_reference(cfg, ego_xy, ego_yaw, path, xy, yaw, length, width)
+    sampling = _footprint_sampling(cfg, ego_xy, xy, length, width)
+    if sampling is None:
+        return np.zeros((1, cfg.rows, cfg.cols), dtype=np.float32)
+    if path is None:
+        raise ValueError("a deformed M_t needs the followed lane's centreline (path)")
+    from hbmp_bench.envs.occupancy_kernel import deformed_grid  # numba loads on the first call
+
+    near, n_long, n_lat = sampling
+    return deformed_grid(float(ego_xy[0]), float(ego_xy[1]), xy[near, 0], xy[near, 1], yaw[near].astype(float),
+                         length[near].astype(float), width[near].astype(float), n_long, n_lat, *path.segment_arrays(),
+                         cfg.rows, cfg.cols, float(cfg.cell_long_m), float(cfg.cell_lat_m), float(cfg.back_m),
+                         float(cfg.ahead_m), float(cfg.half_width_m))
+
+
+def occupancy_grid_reference(cfg: ObservationConfig, ego_xy: np.ndarray, ego_yaw: float, path: Path | None,
+                             xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np.ndarray) -> np.ndarray:
+    """:func:`occupancy_grid` in numpy (the vehicle-centric grid's only form; the deformed one's reference)."""
     grid = np.zeros((1, cfg.rows, cfg.cols), dtype=np.float32)
-    if len(xy) == 0:
+    sampling = _footprint_sampling(cfg, ego_xy, xy, length, width)
+    if sampling is None:
         return grid
-    near = np.hypot(*(xy - ego_xy).T) < cfg.rows * cfg.cell_long_m + 10.0
-    if not near.any():
-        return grid
-    # samples no farther apart than a cell along both box axes, so no covered cell is skipped
-    step = min(cfg.cell_long_m, cfg.cell_lat_m)
-    n_long = max(10, int(np.ceil(float(length[near].max()) / step)) + 1)
-    n_lat = max(4, int(np.ceil(float(width[near].max()) / step)) + 1)
+    near, n_long, n_lat = sampling
     points = _sample_boxes(xy[near], yaw[near], length[near], width[near], n_long=n_long, n_lat=n_lat)
     if cfg.kind == "deformed":
         if path is None:

@@ -29,7 +29,7 @@ from numba import njit
 from .obstacle_kernels import collisions, obstacle_cost, project_poses
 from .rollout import roll_out
 
-__all__ = ["plan_samples", "project_pose", "pairwise_sum"]
+__all__ = ["plan_samples", "project_pose", "segment_of", "pairwise_sum"]
 
 #: ``np.finfo(float).eps``: ``np.sinc`` evaluates ``sin(y) / y`` at this ``y`` when ``y == 0``.
 _EPS = 2.220446049250313e-16
@@ -51,7 +51,7 @@ def _clip(a, lo, hi):
 
 
 @njit(cache=True, nogil=True)
-def _segment_of(s, value):
+def segment_of(s, value):
     """``clip(np.searchsorted(s, value, side="right") - 1, 0, len(s) - 2)``: the segment holding ``value``."""
     lo, hi = 0, len(s)
     while lo < hi:
@@ -127,7 +127,7 @@ def project_pose(px, py, yaw, hint, ps, x0, y0, tx, ty, chord, heading, kappa, d
     if math.isnan(hint):
         i0, i1 = 0, nseg - 1
     else:
-        i0, i1 = _segment_of(ps, hint - _BACK), _segment_of(ps, hint + _AHEAD)
+        i0, i1 = segment_of(ps, hint - _BACK), segment_of(ps, hint + _AHEAD)
     best_d2 = np.inf
     bi = i0
     b_along = b_c = b_cross = 0.0
@@ -163,7 +163,7 @@ def _curve_speed_cap(s0, v, ps, chord, kappa, dk, horizon, decel, ds, curve_lat_
     cap = np.inf
     for j in range(max(n, 0)):
         s = start + j * delta if j != 1 else start + ds
-        i = _segment_of(ps, s)
+        i = segment_of(ps, s)
         c = s - ps[i]
         k = abs(kappa[i] + _clip(c / chord[i], 0.0, 1.0) * dk[i])
         if k > 1e-4:
@@ -283,7 +283,7 @@ def plan_samples(x, y, yaw, v, s_hint, v_ref, speed_limit,
     lk = np.empty(m + 1)
     for q in range(m + 1):
         sq = q * step + a0 if q < m else b0
-        i = _segment_of(ps, sq)
+        i = segment_of(ps, sq)
         c = sq - ps[i]
         frac = _clip(c / chord[i], 0.0, 1.0)
         ls[q] = sq

@@ -1,0 +1,33 @@
+"""The compiled deformed M_t marks the same cells as its numpy form (``occupancy_grid_reference``), on
+the followed lanes of Town03 (curves, junctions, a path's straight extensions) with crowds of cars,
+trucks longer than the default sampling and pedestrians, near and past the grid's edges."""
+
+import numpy as np
+import pytest
+
+from hbmp_bench.envs.observation import ObservationConfig, followed_path, occupancy_grid, occupancy_grid_reference
+from hbmp_bench.scenarios import road_network
+
+
+@pytest.mark.parametrize("cfg", [ObservationConfig(), ObservationConfig(rows=32, cols=20, cell_long_m=2.0, cell_lat_m=1.0)])
+def test_compiled_grid_equals_the_numpy_grid(cfg):
+    net = road_network("Town03")
+    rng = np.random.default_rng(3)
+    lanes = sorted(net.lanes)
+    marked = 0
+    for _ in range(60):
+        lane = lanes[rng.integers(len(lanes))]
+        edges = tuple(e for _, e in net.lane_next.get(lane, ()))[:1]
+        path = followed_path(net, lane, edges, cfg.back_m, cfg.ahead_m)
+        ego_xy = path.xy[rng.integers(len(path.xy))] + rng.normal(0.0, 1.5, 2)
+        k = int(rng.integers(0, 60))
+        xy = ego_xy + rng.uniform(-80.0, 80.0, (k, 2))
+        yaw = rng.uniform(-np.pi, np.pi, k)
+        length = np.where(rng.random(k) < 0.2, 0.6, rng.uniform(3.0, 14.0, k))
+        width = np.where(length < 1.0, 0.6, rng.uniform(1.6, 2.6, k))
+        args = (cfg, ego_xy, float(rng.uniform(-np.pi, np.pi)), path, xy, yaw, length, width)
+        grid = occupancy_grid(*args)
+        np.testing.assert_array_equal(grid, occupancy_grid_reference(*args))
+        assert grid.dtype == np.float32 and grid.shape == (1, cfg.rows, cfg.cols)
+        marked += grid.any()
+    assert marked >= 30
