@@ -83,14 +83,13 @@ def path_actors(path: Path, ego_xy: np.ndarray, ego_length: float, ego_width: fl
     out = {"leader_gap_m": float("inf"), "leader_speed_mps": 0.0, "pedestrians": ()}
     if len(xy) == 0:
         return out
-    s_ego, _ = path.frenet(ego_xy)
+    s_ego = path.project_pose(ego_xy[0], ego_xy[1], 0.0)[0]  # compiled projections: Path.project's floats
     front = float(s_ego) + ego_length / 2
     near = np.hypot(*(xy - ego_xy).T) < LEADER_RANGE_M + ego_length + 10.0
     if not near.any():
         return out
     idx = np.nonzero(near)[0]
-    s, d, theta, _ = path.project(xy[idx], yaw[idx])
-    s, d, theta = np.atleast_1d(s), np.atleast_1d(d), np.atleast_1d(theta)
+    s, d, theta = path.project_poses(xy[idx], yaw[idx])
     c, sn = np.abs(np.cos(theta)), np.abs(np.sin(theta))
     half_long = length[idx] / 2 * c + width[idx] / 2 * sn
     half_lat = length[idx] / 2 * sn + width[idx] / 2 * c

@@ -87,6 +87,7 @@ class Path:
     __slots__ = (
         "xy", "s", "heading", "kappa",
         "_x0", "_y0", "_tx", "_ty", "_seg_len", "_lo", "_hi", "_dh", "_dk", "_uniform", "_segments",
+        "_s_start", "_heading_start",
     )
 
     def __init__(self, xy, *, s_start: float = 0.0, smooth: int = 2, min_spacing: float = 1e-3,
@@ -155,6 +156,8 @@ class Path:
         self._uniform: UniformSegments | None = None
         self._segments = (self.s, self._x0, self._y0, self._tx, self._ty, self._seg_len, self.heading, self.kappa,
                           self._dh, self._dk)
+        self._s_start = self.s[:-1]  # of each segment
+        self._heading_start = self.heading[:-1]
 
     @classmethod
     def _from_arrays(cls, xy, s, heading, kappa) -> Path:
@@ -366,6 +369,19 @@ class Path:
 
         return project_pose(float(x), float(y), float(yaw), np.nan if hint_s is None else float(hint_s),
                             *self._segments)
+
+    def project_poses(self, xy: np.ndarray, yaw: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`project` of M poses without a hint, compiled (:func:`.obstacle_kernels.project_poses`, numba
+        loads on the first call): ``(s, e, theta_e)``, each (M,) [m, m, rad], the same floats.
+
+        Args:
+            xy: (M, 2) positions [m]; yaw: (M,) headings [rad]."""
+        from .obstacle_kernels import project_poses
+
+        xy = np.asarray(xy, dtype=float)
+        return project_poses(np.ascontiguousarray(xy[:, 0]), np.ascontiguousarray(xy[:, 1]),
+                             np.ascontiguousarray(yaw, dtype=float), self._x0, self._y0, self._tx, self._ty,
+                             self._seg_len, self._s_start, self._heading_start, self._dh)
 
     def project(self, xy, yaw, hint_s=None, window: tuple[float, float] = (10.0, 40.0)):
         """Project poses onto the path (nearest segment).

@@ -631,8 +631,9 @@ def plan_reference(problem: PlanningProblem, cfg: PlannerConfig | None = None) -
 
 def compile_kernels(cfg: PlannerConfig | None = None) -> None:
     """Compile the planning kernel (:func:`.plan_kernel.plan_samples`, with the roll-out and obstacle
-    kernels it calls) and what else the executor runs compiled (:meth:`.frame.Path.project_pose`, the
-    tracker's :mod:`.tracking_kernel`), or load them from numba's on-disk cache, before :func:`plan` is timed.
+    kernels it calls) and the planning package's other compiled paths (:meth:`.frame.Path.project_pose` and
+    :meth:`.frame.Path.project_poses`, the tracker's :mod:`.tracking_kernel`), or load them from numba's on-disk
+    cache, before :func:`plan` is timed.
 
     One :func:`plan` on a straight road with one obstacle: ``plan`` passes the kernel the same
     argument types whatever the problem, so this compiles the one signature every later call
@@ -643,6 +644,7 @@ def compile_kernels(cfg: PlannerConfig | None = None) -> None:
     ego = VehicleState(10.0, 0.0, 0.0, 5.0)
     result = plan(PlanningProblem(ego=ego, path=path, v_ref=8.0, speed_limit=10.0, obstacles=obstacles), cfg)
     path.project_pose(10.0, 0.0, 0.0, 10.0)  # the executor's finish check
+    path.project_poses(np.zeros((1, 2)), np.zeros(1))  # the expert's scene
     from .tracking import TrajectoryTracker
 
     TrajectoryTracker().control(ego, result.trajectory, result.times, result.times[1])  # its tracker

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from test_planning_obstacle_kernels import corner_path, random_obstacles, recorded_problems
 
-from hbmp_bench.planning import PlannerConfig, PlanningProblem, VehicleState, plan, planner
+from hbmp_bench.planning import Path, PlannerConfig, PlanningProblem, VehicleState, plan, planner
 from hbmp_bench.planning.plan_kernel import pairwise_sum
 
 ARRAYS = ("times", "trajectories", "omega", "frenet", "costs", "total", "feasible")
@@ -69,3 +69,16 @@ def test_project_pose_is_the_paths_projection():
         x, y, yaw = rng.uniform([-40.0, -20.0, -np.pi], [60.0, 80.0, np.pi])
         hint = None if rng.random() < 0.3 else float(rng.uniform(-20.0, path.length + 20.0))
         assert path.project_pose(x, y, yaw, hint) == path.project(np.array([x, y]), yaw, hint_s=hint)
+
+
+def test_project_poses_is_the_paths_projection():
+    """The compiled projection of many poses without a hint gives Path.project's arrays, on a rounded
+    corner and on coarse polylines (points past both ends, behind and beside)."""
+    rng = np.random.default_rng(6)
+    coarse = Path(rng.uniform(0.0, 40.0, (12, 2)).cumsum(axis=0), max_spacing=None)
+    for path in (corner_path(), coarse, Path([[0.0, 0.0], [50.0, 0.0]], max_spacing=None)):
+        for _ in range(40):
+            m = int(rng.integers(1, 40))
+            xy, yaw = rng.uniform(-100.0, 500.0, (m, 2)), rng.uniform(-4.0, 4.0, m)
+            for got, expect in zip(path.project_poses(xy, yaw), path.project(xy, yaw)):
+                np.testing.assert_array_equal(got, expect)
