@@ -9,7 +9,7 @@ A checkpoint is a dict:
                           "action_space": "discrete" | "box", "env": {env id and options}}
     actor_state_dict     the policy's weights
     critic_state_dict    the value network's weights (PPO; absent for il)
-    optimizer_state_dict to resume (absent in the shipped policy files)
+    optimizer_state_dict to resume (DAgger's; absent in PPO checkpoints and the shipped policy files)
     progress             {"episodes", "decisions", "iterations", "wall_s"}
     train                the training options and the command that produced it
 

@@ -73,6 +73,7 @@ def test_hbmp_from_il_warms_up_the_critic_learns_and_resumes(il_run, tmp_path):
     il = torch.load(il_policy, weights_only=True)
     assert first["kind"] == "hbmp" and first["train"]["reward"] == "dense" and first["train"]["init"] == il_policy
     assert first["train"]["ppo.critic_warmup_episodes"] == 2
+    assert "optimizer_state_dict" not in first, "a PPO checkpoint is small enough to commit: no Adam moments"
     assert all(torch.equal(il["actor_state_dict"][k], v) for k, v in first["actor_state_dict"].items()), \
         "during the critic warm-up the IL actor does not move"
     iterations = read_csv(os.path.join(out, "iterations.csv"))
