@@ -29,7 +29,7 @@ TRAIN_COMMANDS = {
 }
 """How each shipped checkpoint is (re)produced; the model card beside it has the exact command used."""
 
-OBSERVATION_OPTIONS = ("observation",)
+OBSERVATION_OPTIONS = ("observation", "road_profile")
 """Environment options that change what the policy sees (so an evaluation must match them)."""
 
 

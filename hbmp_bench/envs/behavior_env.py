@@ -56,6 +56,8 @@ class BehaviorEnv(gym.Env):
     random_goals: ignore the suite list and draw a fresh start and goal every reset (training).
     fidelity, reward, decision_period_s: see :class:`WorldConfig` (None: its defaults).
     observation: ``deformed`` or ``vehicle_centric`` M_t; grid options via ``observation_config``.
+    road_profile: R_t's entries: ``paper`` (the paper's ten) or ``metric`` (and the stop distance
+        and speed in metric units; see :mod:`hbmp_bench.envs.observation`).
     density: override background traffic (``empty``, ``corl``, ``regular``, ``dense``); another
         value raises ValueError here.
     privileged: add the privileged fields to ``info["scene"]`` (the rule-based expert's; see
@@ -83,6 +85,7 @@ class BehaviorEnv(gym.Env):
         decision_period_s: float = 0.1,
         observation: str = "deformed",
         observation_config: ObservationConfig | None = None,
+        road_profile: str = "paper",
         density: str | None = None,
         render_mode: str | None = None,
         privileged: bool = False,
@@ -93,7 +96,8 @@ class BehaviorEnv(gym.Env):
             town=town, task=task, suite=suite, episode_index=episode_index, random_goals=random_goals,
             density=density, controlled="none", ego_fidelity=WorldConfig.fidelity if fidelity is None else fidelity,
             reward=reward, decision_period_s=decision_period_s, observation=observation,
-            observation_config=observation_config, render_mode=render_mode, privileged=privileged)
+            observation_config=observation_config, road_profile=road_profile, render_mode=render_mode,
+            privileged=privileged)
         self.action_space = self.parallel.action_space(EGO_ID)
         self.observation_space = self.parallel.observation_space(EGO_ID)
         self.render_mode = render_mode

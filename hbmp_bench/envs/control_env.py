@@ -48,7 +48,7 @@ class ControlEnv(gym.Env):
     def __init__(self, town: str = "Town01", task: str = "Navigation", suite: str = "corl2017",
                  episode_index: int | None = None, random_goals: bool = False, fidelity: str | None = None,
                  reward: str = "dense", observation: str = "deformed", observation_config=None,
-                 density: str | None = None, render_mode: str | None = None, privileged: bool = False):
+                 road_profile: str = "paper", density: str | None = None, render_mode: str | None = None, privileged: bool = False):
         if fidelity not in (None, "continuous"):
             raise ValueError(f"the control env always runs the bicycle model; fidelity must be 'continuous', got {fidelity!r}")
         if render_mode not in (None, *self.metadata["render_modes"]):
@@ -56,13 +56,14 @@ class ControlEnv(gym.Env):
         self.parallel = TrafficParallelEnv(
             town=town, task=task, suite=suite, episode_index=episode_index, random_goals=random_goals,
             density=density, controlled="none", ego_fidelity="continuous", ego_driver="control", reward=reward,
-            observation=observation, observation_config=observation_config, render_mode=render_mode,
-            privileged=privileged)
+            observation=observation, observation_config=observation_config, road_profile=road_profile,
+            render_mode=render_mode, privileged=privileged)
         self.render_mode = render_mode
         self.action_space = spaces.Box(-1.0, 1.0, (2,), dtype=np.float32)
         self.observation_space = spaces.Dict(
             occupancy=self.parallel.observation_space(EGO_ID)["occupancy"],
-            road=spaces.Box(-2.0, 2.0, (len(ROAD_FEATURES) + 2,), dtype=np.float32),
+            road=spaces.Box(-2.0, 2.0, (self.parallel.observation_space(EGO_ID)["road"].shape[0] + 2,),
+                            dtype=np.float32),
         )
 
     @property

@@ -103,6 +103,7 @@ class TrafficParallelEnv(ParallelEnv):
         reward: ``dense`` (r_k + r_T) or ``sparse`` (r_T).
         decision_period_s: simulated time per decision in event fidelity [s].
         observation: ``deformed`` or ``vehicle_centric`` M_t; grid options via ``observation_config``.
+        road_profile: R_t's entries, ``paper`` or ``metric`` (see :mod:`hbmp_bench.envs.observation`).
         render_mode: None or ``rgb_array`` (:meth:`render`: the ego-centred top-down view, with
             every vehicle and pedestrian; :meth:`drain_frames`: one picture per SUMO step).
         privileged: add the privileged fields to the ego's ``info["scene"]`` (for the rule-based
@@ -117,12 +118,12 @@ class TrafficParallelEnv(ParallelEnv):
                  density: str | None = None, observation: str = "deformed", render_mode: str | None = None,
                  random_goals: bool = False, decision_period_s: float = 0.1,
                  observation_config: ObservationConfig | None = None, ego_driver: str = "behavior",
-                 privileged: bool = False):
+                 privileged: bool = False, road_profile: str = "paper"):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None, 'rgb_array'")
         self.scenario = ScenarioConfig(town=town, task=task, suite=suite, episode_index=episode_index,
                                        random_goals=random_goals, density=density)
-        obs_cfg = observation_config or ObservationConfig(kind=observation)
+        obs_cfg = observation_config or ObservationConfig(kind=observation, road=road_profile)
         self.config = WorldConfig(fidelity=ego_fidelity, ego_driver=ego_driver, background_fidelity=background_fidelity, reward=reward,
                                   decision_period_s=decision_period_s, observation=obs_cfg, privileged=privileged)
         self.n_controlled = _controlled_count(controlled, self.scenario.least_vehicles)

@@ -31,7 +31,7 @@ from typing import Callable
 import numpy as np
 
 from hbmp_bench.envs.drivers import LANE_CHANGE_CUTOFF_M, feasible_behaviors
-from hbmp_bench.envs.observation import ObservationBuilder, road_profile
+from hbmp_bench.envs.observation import ObservationBuilder, road_profile, road_vector
 from hbmp_bench.envs.privileged import LIGHTS_RANGE_M, PrivilegedScene
 from hbmp_bench.envs.scene import Scene
 from hbmp_bench.maps.roadnet import RoadNetwork
@@ -217,6 +217,7 @@ class ControlledVehicle:
         """({"occupancy": M_t, "road": R_t}, info) now; ``self.scene`` is the typed scene."""
         s, a, k = self.state, self.actors, self.route.index()
         road, self.scene = self.route.road_profile()
+        road = road_vector(self.shared.observer.config, road, self.scene.stop_distance_m, self.scene.speed_mps)
         occupancy = self.shared.observer.occupancy(s.xy, s.yaw, self.followed_lane or s.lane,
                                                    self.route.edges[k + 1: k + 4], a.xy, a.yaw, a.length, a.width)
         info = {

@@ -287,8 +287,8 @@ def with_agent_env(limits: RunnerLimits, agent: AgentDescription) -> RunnerLimit
     from hbmp_bench.envs.observation import ObservationConfig
 
     asked = dict(agent.env_kwargs)
-    if "observation" in asked:  # checked here: not a sim_error in every episode
-        ObservationConfig(kind=asked["observation"])
+    if "observation" in asked or "road_profile" in asked:  # checked here: not a sim_error in every episode
+        ObservationConfig(kind=asked.get("observation", "deformed"), road=asked.get("road_profile", "paper"))
     if PRIVILEGED_OPTION in asked:
         WorldConfig(privileged=asked[PRIVILEGED_OPTION])
     factory = limits.env_factory or agent.env_factory

@@ -6,7 +6,8 @@
     hbmp-bench train flat   ...                                           PPO on acceleration and steering
     hbmp-bench curves DIR [DIR ...] --labels ... --out fig.png             r_T and r_T + Σr_t of several runs
 
-Ablations: ``--init none`` (random instead of IL initialisation), ``--observation vehicle_centric``
+Ablations: ``--init none`` (random instead of IL initialisation), ``--road-profile metric`` (R_t with the stop
+distance and speed in metres and m/s), ``--observation vehicle_centric``
 (non-deformed M_t).
 """
 
@@ -35,7 +36,7 @@ def _command_line(args: argparse.Namespace) -> str:
     parts = ["hbmp-bench", "train", args.kind, "--scenario", args.scenario, "--episodes", str(args.episodes),
              "--workers", str(args.workers), "--seed", str(args.seed), "--out", args.out]
     for flag, value in (("--fidelity", args.fidelity), ("--observation", args.observation),
-                        ("--density", args.density), ("--init", args.init), ("--resume", args.resume),
+                        ("--road-profile", args.road_profile), ("--density", args.density), ("--init", args.init), ("--resume", args.resume),
                         ("--critic-warmup", None if args.critic_warmup is None else str(args.critic_warmup)),
                         ("--backend", None if args.backend == "process" else args.backend),
                         ("--address", args.address)):
@@ -79,7 +80,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if args.fidelity is None:
         args.fidelity = DEFAULT_FIDELITY[kind]
     env_kwargs = {k: v for k, v in (("fidelity", args.fidelity), ("observation", args.observation),
-                                    ("density", args.density)) if v is not None}
+                                    ("road_profile", args.road_profile), ("density", args.density))
+                  if v is not None}
     entry_point = None
     if kind == "flat":
         if importlib.util.find_spec(CONTROL_ENV.split(":")[0]) is None:
@@ -164,6 +166,9 @@ def add_commands(subparsers) -> None:
     p.add_argument("--resume", default=None, help="continue from a run's checkpoint.pt")
     p.add_argument("--observation", choices=("deformed", "vehicle_centric"), default=None,
                    help="M_t kind (default: the env's, deformed)")
+    p.add_argument("--road-profile", choices=("paper", "metric"), default=None,
+                   help="R_t: the paper's ten entries (default) or those and the stop distance and speed in metric "
+                        "units (metric)")
     p.add_argument("--fidelity", default=None,
                    help="env fidelity (default: il event, hbmp/hbmp-s continuous; flat: the control env's)")
     p.add_argument("--density", default=None, help="background traffic (empty, corl, regular, dense; default: the "

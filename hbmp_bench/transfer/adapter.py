@@ -34,7 +34,7 @@ except ModuleNotFoundError as exc:
     raise ModuleNotFoundError("the highway-env transfer envs need highway-env, an optional extra: "
                               "pip install 'hbmp-bench[highway-env]'", name=exc.name) from exc
 
-from hbmp_bench.envs.observation import ROAD_FEATURES, ObservationConfig, occupancy_grid
+from hbmp_bench.envs.observation import ROAD_FEATURES, ObservationConfig, occupancy_grid, road_vector
 from hbmp_bench.planning.behaviors import BEHAVIORS, Behavior
 from hbmp_bench.planning.frame import Path
 from hbmp_bench.transfer.scenes import TransferScene
@@ -260,4 +260,5 @@ class HighwayAdapter:
     def observe(self, ego) -> tuple[dict, dict, np.ndarray]:
         """(observation {"occupancy", "road"}, scene dict, action mask) for the ego now."""
         road, scene = self.road_profile(ego)
+        road = road_vector(self.config, road, scene["stop_distance_m"], scene["speed_mps"])
         return {"occupancy": self.occupancy(ego), "road": road}, scene, self.action_mask(ego)

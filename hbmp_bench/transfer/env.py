@@ -152,12 +152,12 @@ class HighwayTransferEnv(gym.Env):
     metadata = {"render_modes": ["rgb_array"]}
 
     def __init__(self, scene: str = "highway", observation: str = "deformed",
-                 observation_config: ObservationConfig | None = None, decision_period_s: float = 0.1,
+                 observation_config: ObservationConfig | None = None, road_profile: str = "paper", decision_period_s: float = 0.1,
                  speed_step_mps: float = 2.0, lane_change_max_s: float = 5.0, render_mode: str | None = None):
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None, 'rgb_array'")
         self.scene: TransferScene = get_scene(scene)
-        obs_cfg = observation_config or ObservationConfig(kind=observation)
+        obs_cfg = observation_config or ObservationConfig(kind=observation, road=road_profile)
         self.config = TransferConfig(observation=obs_cfg, decision_period_s=decision_period_s,
                                      speed_step_mps=speed_step_mps, lane_change_max_s=lane_change_max_s)
         self.render_mode = render_mode

@@ -44,7 +44,8 @@ def run_transfer_episodes(agent: str, scene: str, episodes: int, observation: st
     if episodes <= 0:
         raise ValueError(f"episodes must be > 0, got {episodes}")
     policy = load_agent(agent)
-    env = HighwayTransferEnv(scene=scene, observation=observation)
+    road_profile = dict(getattr(policy, "env_kwargs", {})).get("road_profile", "paper")  # R_t it was trained on
+    env = HighwayTransferEnv(scene=scene, observation=observation, road_profile=road_profile)
     records: list[EpisodeRecord] = []
     from tqdm import tqdm
 

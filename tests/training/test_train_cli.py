@@ -138,3 +138,22 @@ def test_flat_trains_on_the_control_env_and_is_evaluated_there(tmp_path):
     (record,) = result.records
     assert record.end_reason not in ("agent_error", "sim_error"), record.error
     assert record.decisions > 0
+
+
+def test_metric_road_profile_travels_from_training_to_evaluation(tmp_path):
+    """An il run on the metric R_t records it; its checkpoint asks the evaluator for it (and gets 12 entries)."""
+    from hbmp_bench.evaluation import evaluate
+
+    out = str(tmp_path / "il-metric")
+    assert main(["train", "il", "--episodes", "1", "--workers", "1", "--out", out, "--road-profile", "metric",
+                 *COMMON]) == 0
+    policy = os.path.join(out, "policy.pt")
+    ckpt = torch.load(policy, weights_only=True)
+    assert ckpt["model"]["obs_shapes"]["road"] == [12] and ckpt["model"]["env"]["road_profile"] == "metric"
+    agent = load_agent(policy)
+    assert agent.env_kwargs == {"road_profile": "metric"}
+    result = evaluate("corl2017", policy, towns=["Town02"], tasks=["Straight"], episodes=1, workers=1,
+                      fidelity="event", out_dir=tmp_path / "eval", progress=False)
+    (record,) = result.records
+    assert record.end_reason not in ("agent_error", "sim_error"), record.error
+    assert record.decisions > 0
