@@ -28,6 +28,7 @@ from numba import njit
 
 from .obstacle_kernels import collisions, obstacle_cost, project_poses
 from .rollout import roll_out
+from .tracking_kernel import bisect_right
 
 __all__ = ["plan_samples", "project_pose", "segment_of", "pairwise_sum"]
 
@@ -53,14 +54,7 @@ def _clip(a, lo, hi):
 @njit(cache=True, nogil=True)
 def segment_of(s, value):
     """``clip(np.searchsorted(s, value, side="right") - 1, 0, len(s) - 2)``: the segment holding ``value``."""
-    lo, hi = 0, len(s)
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if s[mid] <= value:
-            lo = mid + 1
-        else:
-            hi = mid
-    return min(max(lo - 1, 0), len(s) - 2)
+    return min(max(bisect_right(s, value, len(s)) - 1, 0), len(s) - 2)
 
 
 @njit(cache=True, nogil=True)

@@ -16,6 +16,19 @@ import math
 import numpy as np
 from numba import njit
 
+
+@njit(cache=True, nogil=True)
+def bisect_right(a, value, n):
+    """``np.searchsorted(a[:n], value, side="right")``: how many of the sorted ``a[:n]`` are <= ``value``."""
+    lo, hi = 0, n
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if a[mid] <= value:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
 __all__ = ["interp", "lookahead_point"]
 
 
@@ -29,14 +42,7 @@ def interp(x, xp, fp):
         return fp[n - 1]
     if x < xp[0]:
         return fp[0]
-    lo, hi = 0, n  # j: the last index with xp[j] <= x
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if xp[mid] <= x:
-            lo = mid + 1
-        else:
-            hi = mid
-    j = lo - 1
+    j = bisect_right(xp, x, n) - 1  # the last index with xp[j] <= x
     if j == n - 1 or xp[j] == x:
         return fp[j]
     slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
@@ -92,13 +98,6 @@ def lookahead_point(path, px, py, dist):
     if s_target >= cum[m]:
         f = 1.0 + (s_target - cum[m]) / L[m - 1]
         return sx[m - 1] + gx[m - 1] * f, sy[m - 1] + gy[m - 1] * f
-    lo, hi = 0, m + 1  # k: the last index with cum[k] <= s_target
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if cum[mid] <= s_target:
-            lo = mid + 1
-        else:
-            hi = mid
-    k = lo - 1
+    k = bisect_right(cum, s_target, m + 1) - 1  # the last index with cum[k] <= s_target
     f = (s_target - cum[k]) / L[k]
     return sx[k] + gx[k] * f, sy[k] + gy[k] * f
