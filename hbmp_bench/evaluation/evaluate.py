@@ -11,7 +11,8 @@ The agent is untrusted: no code of it runs in this process. It is built once in 
 agent process first (``describe_agent``), which also says which env it needs (only known envs
 and observation options are accepted). While the run goes on, the records file must hold
 exactly what this run appended to it (``integrity.RecordsLedger``); a file changed behind the
-evaluator's back raises ``TamperedError``.
+evaluator's back raises ``TamperedError``. One evaluation at a time writes a records file
+(``integrity.records_lock``): a second one on the same file is refused, naming the first.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from pathlib import Path
 
 from hbmp_bench.errors import Interrupted, UnknownNameError, UserError
 from hbmp_bench.evaluation.channel import AgentDescription
-from hbmp_bench.evaluation.integrity import RecordsLedger
+from hbmp_bench.evaluation.integrity import RecordsLedger, records_lock
 from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool, describe_agent
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, agent_slug, suite_tasks
 from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, EpisodeRecord, latest_per_key, repair_records
@@ -187,23 +188,25 @@ def evaluate(
         fingerprint = description.fingerprint
     path = Path(path) if path is not None else records_path(out_dir, selection[0].suite, agent)
     path.parent.mkdir(parents=True, exist_ok=True)
-    check_provenance(path, agent, fingerprint, sorted({t.town for t in selection}))
-    repair_records(path)
-    ledger = RecordsLedger(path)
-    finished = {r.key for r in latest_per_key(ledger.records()) if r.end_reason != SIM_ERROR}
-    todo = [t for t in selection if t.key not in finished]
-    start = time.perf_counter()
-    ran = 0
-    try:
-        for outcome in iter_outcomes(todo, workers=workers, backend=backend, address=address, limits=limits,
-                                     progress=progress):
-            ledger.append(outcome.record)
-            ran += 1
-    except KeyboardInterrupt:  # the pool has ended its processes on the way out
-        kept = len(selection) - len(todo) + ran
-        raise EvaluationInterrupted(path, kept, len(selection)) from None
+    with records_lock(path):
+        check_provenance(path, agent, fingerprint, sorted({t.town for t in selection}))
+        repair_records(path)
+        ledger = RecordsLedger(path)
+        finished = {r.key for r in latest_per_key(ledger.records()) if r.end_reason != SIM_ERROR}
+        todo = [t for t in selection if t.key not in finished]
+        start = time.perf_counter()
+        ran = 0
+        try:
+            for outcome in iter_outcomes(todo, workers=workers, backend=backend, address=address, limits=limits,
+                                         progress=progress):
+                ledger.append(outcome.record)
+                ran += 1
+        except KeyboardInterrupt:  # the pool has ended its processes on the way out
+            kept = len(selection) - len(todo) + ran
+            raise EvaluationInterrupted(path, kept, len(selection)) from None
+        records = ledger.records()
     wanted = {t.key: k for k, t in enumerate(selection)}
-    records = sorted((r for r in latest_per_key(ledger.records()) if r.key in wanted), key=lambda r: wanted[r.key])
+    records = sorted((r for r in latest_per_key(records) if r.key in wanted), key=lambda r: wanted[r.key])
     return EvaluationResult(path, tuple(records), ran, len(selection) - len(todo), time.perf_counter() - start,
                             len(selection) - len(records), privileged=is_privileged(limits))
 

@@ -9,6 +9,10 @@ leaderboard folder (one that runs as ``nobody`` cannot, see ``sandbox``). So the
 - notes the leaderboard folder's results files before a submission runs (``BoardSnapshot``) and
   refuses to write its entry when one was added, changed or removed meanwhile.
 
+One evaluation at a time writes a records file (``RecordsLock``): a second one started on the same
+file (the same suite, agent and ``--out``) is refused with a message naming the running one,
+rather than both appending and the ledger reporting the other's records as tampering.
+
 A file found changed is moved aside to ``<name>.tampered`` (never deleted), so neither
 ``hbmp-bench report``, a resumed evaluation nor the leaderboard picks up what it holds.
 
@@ -18,10 +22,14 @@ trustworthy as the runs that wrote them.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
+from hbmp_bench.errors import UserError
 from hbmp_bench.metrics.records import EpisodeRecord, append_record, parse_records, record_line
 
 
@@ -41,6 +49,32 @@ def quarantine(path: Path) -> Path | None:
     except FileNotFoundError:
         return None
     return target
+
+
+class EvaluationRunning(UserError):
+    """Another evaluation holds the records file's lock."""
+
+
+@contextlib.contextmanager
+def records_lock(path: str | os.PathLike) -> Iterator[None]:
+    """Hold the exclusive lock ``<records>.lock`` for the block; raise :class:`EvaluationRunning` at once
+    when another process holds it. The lock file stays (removing it would race with a waiter); it
+    holds the pid of the last evaluation that took it."""
+    lock_path = Path(path).with_name(Path(path).name + ".lock")
+    fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "unknown"
+            raise EvaluationRunning(
+                f"another evaluation (pid {holder}) is writing {path}: wait for it to finish, or evaluate into "
+                f"another --out folder") from None
+        os.ftruncate(fd, 0)
+        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
+        yield
+    finally:
+        os.close(fd)  # releases the lock
 
 
 class RecordsLedger:

@@ -8,8 +8,8 @@ import pytest
 
 from hbmp_bench.evaluation import RunnerLimits
 from hbmp_bench.evaluation.channel import AgentDescription
-from hbmp_bench.evaluation.evaluate import is_privileged, with_agent_env
-from hbmp_bench.evaluation.integrity import BoardSnapshot, RecordsLedger, TamperedError
+from hbmp_bench.evaluation.evaluate import evaluate, is_privileged, with_agent_env
+from hbmp_bench.evaluation.integrity import BoardSnapshot, EvaluationRunning, RecordsLedger, TamperedError, records_lock
 from hbmp_bench.evaluation.leaderboard import check_results, results_document
 from hbmp_bench.evaluation.sandbox import agent_account
 from hbmp_bench.metrics.records import EpisodeRecord, append_record, read_records, record_line
@@ -61,6 +61,22 @@ def test_the_ledger_checks_before_reading_results(tmp_path):
     with pytest.raises(TamperedError):
         ledger.records()
     assert any(r.success for r in read_records(tmp_path / "r.jsonl.tampered"))
+
+
+def test_one_evaluation_at_a_time_writes_a_records_file(tmp_path):
+    path = tmp_path / "corl2017__expert.jsonl"
+    append_record(path, RECORD)
+    before = path.read_bytes()
+    with records_lock(path):
+        with pytest.raises(EvaluationRunning, match=f"pid {os.getpid()}.*{path.name}.*another --out"):
+            with records_lock(path):
+                pass
+        with pytest.raises(EvaluationRunning):  # the evaluator takes it before it reads or writes anything
+            evaluate("corl2017", "expert", towns=["Town01"], tasks=["Straight"], episodes=1, path=path,
+                     check_agent=False, progress=False)
+    assert path.read_bytes() == before and not (tmp_path / (path.name + ".tampered")).exists()
+    with records_lock(path):  # released on the way out, also after the refusal
+        pass
 
 
 def test_the_board_snapshot_names_added_changed_and_removed_files(tmp_path):
