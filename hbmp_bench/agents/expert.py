@@ -390,8 +390,10 @@ class ExpertAgent:
         if not mask[action] or road[3] > 0.5:
             return None, []
         # wait for a gap where lane changes are still open (room for one at the lane-change speed);
-        # past that point drive on: the route is re-planned from where the lane leads
+        # past that point drive on: the route is re-planned from where the lane leads. On the goal's
+        # edge the lane leads on past the goal: the change must be done before the goal point
         room = 16.0 if t.keep_s > 0.2 else 12.0
+        d = min(d, scene.get("goal_distance_m", INF) - EGO_LENGTH_M / 2)
         return None, ([Target(d - room, 0.0, "route_lane", hard=True)] if d - room > 0.0 else [])
 
     def _lane_change_safe(self, scene: dict, targets: list[Target], t: Timing) -> bool:
