@@ -25,8 +25,9 @@ is taken (a time window):
                          ego is; a standing foe is passed unless it has the right of way and the ego
                          has not entered the junction yet; a foe held by a red light is passed.
 ``_rule_pedestrians``    stop before a pedestrian who is in the ego's path or walks into it while the
-                         ego would pass, and for those waiting at a crossing of its path whose signal
-                         lets them go.
+                         ego would pass (before the crossing, where that is on a crossing of its path:
+                         a car standing on a crossing is in the way of everyone on it), and for those
+                         waiting at a crossing of its path whose signal lets them go.
 ``_rule_route_lane``     (a lane change, not a speed) move towards the lane that continues the route as
                          soon as the target lane is free and the change fits before the next stop;
                          wait before the lane's end for a gap.
@@ -319,6 +320,7 @@ class ExpertAgent:
 
     def _rule_pedestrians(self, scene: dict, t: Timing) -> list[Target]:
         out = []
+        ahead = [c for c in scene.get("crossings", ()) if c["ego_dist_m"] >= 0.5]
         for s, d, v_s, v_d in scene.get("pedestrians", ()):
             if s < 0.5:
                 continue  # beside or behind the front bumper: driving on takes the ego away
@@ -326,26 +328,42 @@ class ExpertAgent:
             # stands (e.g. at the kerb, waiting to cross)
             w = 0.9 + (1.0 if math.hypot(v_s, v_d) > 0.2 else 0.5)
             if abs(d) < w:
-                p_in = 0.0
+                p_in, meet = 0.0, s
                 p_out = (math.copysign(w, v_d) - d) / v_d if abs(v_d) > 0.2 else INF
             elif d * v_d < 0.0 and abs(v_d) > 0.2:
                 p_in, p_out = (abs(d) - w) / abs(v_d), (abs(d) + w) / abs(v_d)
+                meet = s - v_s * d / v_d  # where its walk meets the path
             else:
                 continue
-            at = s - self.stop_margin_m
+            # one who is on, or walks onto, the ego's path over a crossing walks the crossing's
+            # length (obliquely to a turning path, and through a car standing on it): stop before
+            # the crossing, not on it
+            at = min([s] + [c["ego_dist_m"] for c in ahead if c["ego_dist_m"] <= meet <= c["ego_exit_m"]]) \
+                - self.stop_margin_m
+            at = self._off_crossings(at, ahead)
             out.append(Target(at, 0.0, "pedestrian", hard=True, from_s=p_in - 1.0, until_s=p_out + 1.0,
-                              zone_m=self.stop_margin_m + EGO_LENGTH_M + 1.0))
+                              zone_m=s - at + EGO_LENGTH_M + 1.0))
         # a pedestrian waiting at a crossing of the ego's path steps onto it when the signal lets
         # them (walking at 1 to 1.5 m/s)
         for c in scene.get("crossings", ()):
             if (c["signal"] and c["signal"] in RED + YELLOW) or c["ego_dist_m"] < 0.5:
                 continue  # held by their signal, or the ego is on the crossing already: clear it
-            at = c["ego_dist_m"] - self.stop_margin_m
+            at = self._off_crossings(c["ego_dist_m"] - self.stop_margin_m, ahead)
             for gap in c["waiting_m"]:
                 out.append(Target(at, 0.0, "pedestrian", hard=True, from_s=max(gap - 2.5, 0.0) / 1.5 - 1.0,
                                   until_s=(gap + 2.5) / 1.0 + 1.0,
                                   zone_m=c["ego_exit_m"] - at + EGO_LENGTH_M))
         return out
+
+    def _off_crossings(self, at_m: float, crossings) -> float:
+        """Where to stop for a stop point ``at_m`` ahead [m] so that the car stands on none of the
+        ``crossings`` ahead (pedestrians walk through a car on their crossing): at ``at_m``, or
+        before the nearest crossing whose stretch its body would still cover there (two crossings
+        of a turn at a junction corner may lie less than a car length apart)."""
+        for c in sorted(crossings, key=lambda c: -c["ego_dist_m"]):  # farthest first: a chain
+            if c["ego_dist_m"] < at_m < c["ego_exit_m"] + EGO_LENGTH_M:
+                at_m = c["ego_dist_m"] - self.stop_margin_m
+        return at_m
 
     def _rule_route_lane(self, scene: dict, occupancy: np.ndarray, mask: np.ndarray, t: Timing,
                          road: np.ndarray, targets: list[Target]) -> tuple[int | None, list[Target]]:
@@ -372,8 +390,10 @@ class ExpertAgent:
         if not mask[action] or road[3] > 0.5:
             return None, []
         # wait for a gap where lane changes are still open (room for one at the lane-change speed);
-        # past that point drive on: the route is re-planned from where the lane leads
+        # past that point drive on: the route is re-planned from where the lane leads. On the goal's
+        # edge the lane leads on past the goal: the change must be done before the goal point
         room = 16.0 if t.keep_s > 0.2 else 12.0
+        d = min(d, scene.get("goal_distance_m", INF) - EGO_LENGTH_M / 2)
         return None, ([Target(d - room, 0.0, "route_lane", hard=True)] if d - room > 0.0 else [])
 
     def _lane_change_safe(self, scene: dict, targets: list[Target], t: Timing) -> bool:

@@ -141,10 +141,11 @@ def _sample_boxes(xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np
 
 
 def followed_path(net: RoadNetwork, lane_id: str, next_edges: tuple[str, ...], back_m: float, ahead_m: float,
-                  max_spacing: float | None = None, round_corners: int = 0) -> Path:
+                  max_spacing: float | None = None, round_corners: int = 0, via: str = "") -> Path:
     """The centreline the ego follows: ``lane_id`` extended straight back by ``back_m`` [m] and ahead
     by at least ``ahead_m`` [m] along the lanes that lead to the route's ``next_edges``, through
-    junctions (the paper's "virtual lanes"); straight on past a dead end. ``max_spacing`` [m]
+    junctions (the paper's "virtual lanes"); straight on past a dead end. ``via``: the junction lane
+    to leave ``lane_id`` by where several links lead onto the next edge (default: the first). ``max_spacing`` [m]
     densifies the polyline and ``round_corners`` passes of corner cutting round SUMO's coarse
     vertices (:func:`hbmp_bench.planning.round_corners`), which the motion planner needs;
     the defaults keep SUMO's vertices (enough for M_t)."""
@@ -155,6 +156,8 @@ def followed_path(net: RoadNetwork, lane_id: str, next_edges: tuple[str, ...], b
     lane, beyond, k = lane_id, 0.0, 0
     while beyond < ahead_m:
         nxt = net.follow(lane, next_edges[k] if k < len(next_edges) else None)
+        if lane == lane_id and via and any(step == via for step, _ in net.lane_next.get(lane, ())):
+            nxt = via
         if nxt is None:
             fwd = pieces[-1][-1] - pieces[-1][-2]
             pieces.append(pieces[-1][-1] + fwd / max(np.hypot(*fwd), 1e-9) * (ahead_m - beyond))

@@ -166,7 +166,7 @@ class PrivilegedScene:
         self.net, self.sim, self.vehicle_id, self.vtype = net, sim, vehicle_id, vtype
         self.fidelity, self.lane_path = fidelity, lane_path
         self._path = functools.lru_cache(maxsize=256)(
-            lambda lane, nxt: followed_path(net, lane, nxt, 10.0, LEADER_RANGE_M + 20.0))
+            lambda lane, nxt, via: followed_path(net, lane, nxt, 10.0, LEADER_RANGE_M + 20.0, via=via))
 
     def fields(self, ego: VehicleState, followed_lane: str, next_edges: tuple[str, ...], actors: Actors,
                lights: list[LightAhead], junction_exit_m: float) -> dict:
@@ -174,13 +174,14 @@ class PrivilegedScene:
         ``actors``; the world measures along its route the ``lights`` ahead (nearest first) and
         ``junction_exit_m``."""
         lane = followed_lane or ego.lane
-        out = path_actors(self._path(lane, tuple(next_edges[:3])), ego.xy, self.vtype.length, self.vtype.width,
-                          actors.xy, actors.yaw, actors.speed, actors.length, actors.width, actors.is_pedestrian)
+        link, entry = self._link_ahead(ego, followed_lane, next_edges)
+        out = path_actors(self._path(lane, tuple(next_edges[:3]), link.via if link is not None else ""), ego.xy,
+                          self.vtype.length, self.vtype.width, actors.xy, actors.yaw, actors.speed, actors.length,
+                          actors.width, actors.is_pedestrian)
         out["lights_ahead"] = tuple((float(light.distance), light.state,
                                      self.sim.signal_schedule(light.tls, light.link_index))
                                     for light in lights if light.distance <= LIGHTS_RANGE_M)
         out["junction_exit_m"] = junction_exit_m
-        link, entry = self._link_ahead(ego, followed_lane, next_edges)
         out["junction_foes"] = () if link is None else self._junction_foes(link, entry)
         out["crossings"] = () if link is None else self._crossings(link, entry, actors)
         out["fidelity"] = self.fidelity
@@ -194,12 +195,18 @@ class PrivilegedScene:
     def _link_ahead(self, ego: VehicleState, followed_lane: str, next_edges: tuple[str, ...]) -> tuple[Connection | None, float]:
         """The link from the followed lane onto the route's next edge (the junction ahead, or the
         one the vehicle is in) and the distance from the front bumper to its start [m] (negative
-        inside); (None, nan) where there is none."""
+        inside); (None, nan) where there is none. Where several links lead there, in event
+        fidelity the one SUMO drives the vehicle over (the one it is on, or the one it approaches);
+        with the motion planner the first, the one its centreline follows."""
         if followed_lane not in self.net.lanes:
             return None, float("nan")
         lane = self.net.lane(followed_lane)
         nxt = next_edges[0] if next_edges else None
-        link = next((c for c in self.net.connections[lane.edge] if c.from_lane == followed_lane and c.to_edge == nxt), None)
+        links = [c for c in self.net.connections[lane.edge] if c.from_lane == followed_lane and c.to_edge == nxt]
+        link = links[0] if links else None
+        if len(links) > 1 and self.lane_path is None:
+            on = ego.lane if ego.lane in self.net.internal_lanes else self.sim.next_junction_lane(self.vehicle_id)
+            link = next((c for c in links if c.via == on or on in self.net.link_lanes(c)), link)
         if link is None or len(self.net.link_shape(link)) < 2:
             return None, float("nan")
         ends, direction = stop_line_of(lane.shape, lane.width)

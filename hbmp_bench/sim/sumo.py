@@ -458,6 +458,12 @@ class SumoSim:
                 out.append((vid, dist, self._api.vehicle.getSpeed(vid)))
         return tuple(out)
 
+    def next_junction_lane(self, vehicle_id: str) -> str:
+        """The first junction (internal) lane of the link SUMO drives the vehicle over at the next
+        junction (its choice where several links lead onto the route's next edge), "" if none."""
+        links = self._api.vehicle.getNextLinks(vehicle_id)
+        return str(links[0][4]) if links else ""
+
     def crossing_waiters(self, crossing: str, walkingareas: tuple[str, ...]) -> tuple[str, ...]:
         """The pedestrians on the walking areas at a crossing's ends whose next edge is the crossing."""
         return tuple(pid for area in walkingareas for pid in self._api.edge.getLastStepPersonIDs(area)

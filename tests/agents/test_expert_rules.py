@@ -9,7 +9,7 @@ import pytest
 
 from hbmp_bench.agents import agent_env_kwargs
 from hbmp_bench.agents.expert import CHANGE_LEFT, CHANGE_RIGHT, KEEP, SPEED_DOWN, SPEED_UP, ExpertAgent, Timing
-from hbmp_bench.envs.observation import ObservationConfig
+from hbmp_bench.envs.observation import LANE_WIDTH_M, ObservationConfig
 
 GRID = ObservationConfig()
 INF = float("inf")
@@ -216,6 +216,33 @@ def test_pedestrians_waits_for_one_about_to_step_onto_a_crossing_of_its_path():
     # their signal is red: they stay; nobody waits; the ego is over the crossing already
     for other in ({**crossing, "signal": "r"}, {**crossing, "waiting_m": ()}, {**crossing, "ego_dist_m": -1.0}):
         assert act(**at_line, crossings=(other,)) == SPEED_UP
+
+
+def test_pedestrians_on_a_crossing_are_waited_for_before_the_crossing_not_on_it():
+    # a turn over a crossing whose stretch of the path runs 5..11 m ahead; a pedestrian walks it
+    # obliquely to the path: 8 m ahead, 5 m to the left, coming across (Town04 NavigationDynamic 6)
+    crossing = {"ego_dist_m": 5.0, "ego_exit_m": 11.0, "signal": "G", "waiting_m": ()}
+    walker = (8.0, 5.0, -0.3, -1.2)
+    stops = [g for g in ExpertAgent().targets(*situation(pedestrians=(walker,), crossings=(crossing,), speed_mps=4.0))
+             if g.rule == "pedestrian"]
+    assert [g.at_m for g in stops] == [pytest.approx(5.0 - ExpertAgent().stop_margin_m)]
+    # and off a crossing it has begun to pass too, when the two lie less than a car length apart
+    first = {"ego_dist_m": 1.0, "ego_exit_m": 4.0, "signal": "r", "waiting_m": ()}
+    stops = [g for g in ExpertAgent().targets(*situation(pedestrians=(walker,), crossings=(first, crossing),
+                                                         speed_mps=4.0)) if g.rule == "pedestrian"]
+    assert [g.at_m for g in stops] == [pytest.approx(1.0 - ExpertAgent().stop_margin_m)]
+
+
+def test_route_lane_changes_before_the_goal_on_the_goal_edge():
+    # the goal lane is on the right, 20 m ahead on this edge, which goes on for 100 m; the right
+    # lane is taken (Town05 NavigationDynamic 1)
+    taken = np.zeros((1, GRID.rows, GRID.cols), np.float32)
+    right = int(GRID.cols / 2 - LANE_WIDTH_M / GRID.cell_lat_m)
+    taken[0, :, right - 1:right + 2] = 1.0
+    scene = dict(route_lane_offset=-1, stop_distance_m=100.0, speed_mps=8.0, fidelity="event", duration_s=0.1,
+                 occupancy=taken, road=(1, 1, 0, 0, 1, 0, 0, 0, 1, 0.6))
+    assert act(**scene, goal_distance_m=20.0) == SPEED_DOWN  # waits for a gap before the goal
+    assert act(**scene, goal_distance_m=500.0) == SPEED_UP  # the lane's end is far: drives on
 
 
 def test_pedestrians_beside_the_ego_do_not_stop_it():
