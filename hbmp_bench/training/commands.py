@@ -68,6 +68,22 @@ def resolve_init(kind: str, init: str | None) -> str | None:
     return shipped_checkpoint(init)
 
 
+INPUT_OPTIONS = ("observation", "road_profile")
+"""Env options a PPO run takes from its ``--init`` checkpoint when the command does not give them: the network's
+inputs must be what the initial actor was trained on."""
+RUN_OPTIONS = ("fidelity", "observation", "road_profile", "density")
+"""Env options a ``--resume`` takes from the checkpoint when the command does not give them: the run goes on as
+it began."""
+
+
+def recorded_env_options(checkpoint: str, names: tuple[str, ...]) -> dict[str, str]:
+    """The env options ``names`` that ``checkpoint`` recorded (those it did not record are left out)."""
+    from hbmp_bench.training.checkpoints import load_checkpoint
+
+    recorded = load_checkpoint(checkpoint).get("model", {}).get("env", {})
+    return {k: recorded[k] for k in names if k in recorded}
+
+
 def _cmd_train(args: argparse.Namespace) -> int:
     from hbmp_bench.training.run import RunConfig
     from hbmp_bench.training.worker import WorkerEnvConfig
@@ -77,6 +93,11 @@ def _cmd_train(args: argparse.Namespace) -> int:
         args.episodes = DEFAULT_EPISODES[kind]
     if args.out is None:
         args.out = os.path.join("runs", f"{kind}__{args.scenario.split('/')[-1]}__{args.seed}__{int(time.time())}")
+    init = resolve_init(kind, args.init) if args.resume is None else None
+    source = (args.resume, RUN_OPTIONS) if args.resume else (init, INPUT_OPTIONS) if init else None
+    for name, value in (recorded_env_options(*source) if source else {}).items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
     if args.fidelity is None:
         args.fidelity = DEFAULT_FIDELITY[kind]
     env_kwargs = {k: v for k, v in (("fidelity", args.fidelity), ("observation", args.observation),
@@ -88,7 +109,6 @@ def _cmd_train(args: argparse.Namespace) -> int:
             raise ValueError("train flat needs the continuous-control env hbmp_bench.envs.control_env.ControlEnv, "
                              "which this installation does not have yet")
         entry_point = CONTROL_ENV
-    init = resolve_init(kind, args.init) if args.resume is None else None
     env_config = WorkerEnvConfig(env_id=args.scenario, env_kwargs=env_kwargs, entry_point=entry_point,
                                  reward=REWARD[kind])
     run = RunConfig(kind=kind, episodes=args.episodes, out=args.out, workers=args.workers, backend=args.backend,
@@ -163,12 +183,13 @@ def add_commands(subparsers) -> None:
     p.add_argument("--out", default=None, help="run folder (default: runs/<kind>__<scenario>__<seed>__<time>)")
     p.add_argument("--init", default=None,
                    help="hbmp/hbmp-s actor initialisation: 'il' (shipped, default), a .pt checkpoint, or 'none'")
-    p.add_argument("--resume", default=None, help="continue from a run's checkpoint.pt")
+    p.add_argument("--resume", default=None, help="continue from a run's checkpoint.pt (with the fidelity, M_t, R_t "
+                                                  "and density it recorded, unless given)")
     p.add_argument("--observation", choices=("deformed", "vehicle_centric"), default=None,
-                   help="M_t kind (default: the env's, deformed)")
+                   help="M_t kind (default: the --init checkpoint's, else the env's: deformed)")
     p.add_argument("--road-profile", choices=("paper", "metric"), default=None,
-                   help="R_t: the paper's ten entries (default) or those and the stop distance and speed in metric "
-                        "units (metric)")
+                   help="R_t: the paper's ten entries or those and the stop distance and speed in metric units "
+                        "(metric); default: the --init checkpoint's, else paper")
     p.add_argument("--fidelity", default=None,
                    help="env fidelity (default: il event, hbmp/hbmp-s continuous; flat: the control env's)")
     p.add_argument("--density", default=None, help="background traffic (empty, corl, regular, dense; default: the "

@@ -157,3 +157,13 @@ def test_metric_road_profile_travels_from_training_to_evaluation(tmp_path):
     (record,) = result.records
     assert record.end_reason not in ("agent_error", "sim_error"), record.error
     assert record.decisions > 0
+
+    # PPO from it takes the metric R_t from the checkpoint (no --road-profile given), and so does its resume
+    hbmp = str(tmp_path / "hbmp")
+    assert main(["train", "hbmp", "--episodes", "1", "--workers", "1", "--out", hbmp, "--init", policy,
+                 "--critic-warmup", "0", "--save-every", "1", *COMMON]) == 0
+    assert main(["train", "hbmp", "--episodes", "2", "--workers", "1", "--out", hbmp,
+                 "--resume", os.path.join(hbmp, "checkpoint.pt"), *COMMON]) == 0
+    ckpt = torch.load(os.path.join(hbmp, "checkpoint.pt"), weights_only=True)
+    assert ckpt["model"]["env"]["road_profile"] == "metric" and ckpt["progress"]["episodes"] == 2
+    assert "--road-profile metric" in open(os.path.join(hbmp, "MODEL_CARD.md")).read()
