@@ -223,20 +223,23 @@ class _Timer:
 
 @contextlib.contextmanager
 def _instrumented(env):
-    """Time the SUMO step, the ego driver's control period, the planner, M_t, R_t and the detectors
-    of ``env`` in place (instance attributes shadow the methods; module functions are swapped).
+    """Time the SUMO step, the ego driver's control period, the planner, M_t, R_t, the privileged scene
+    (the expert's ``info["scene"]`` fields) and the detectors of ``env`` in place (instance attributes
+    shadow the methods; module functions are swapped).
 
     Yields a dict name -> :class:`_Timer`; everything is restored on exit."""
     import hbmp_bench.envs.vehicle as vehicle_module
     import hbmp_bench.planning.executor as executor_module
 
+    from hbmp_bench.envs.privileged import PrivilegedScene
     from hbmp_bench.metrics.detectors import InfractionDetector
 
     world = env.world
     timers = {"sumo_step": _Timer(world.sim.step), "snapshot": _Timer(world.sim.snapshot),
               "driver_before_step": _Timer(world.ego_driver.before_step),
               "planner": _Timer(executor_module.plan), "road_profile": _Timer(vehicle_module.road_profile),
-              "detectors": _Timer(InfractionDetector.update), "occupancy": _Timer(world.observer.occupancy)}
+              "detectors": _Timer(InfractionDetector.update), "occupancy": _Timer(world.observer.occupancy),
+              "privileged_scene": _Timer(PrivilegedScene.fields)}
     saved = executor_module.plan, vehicle_module.road_profile
     world.sim.step, world.sim.snapshot = timers["sumo_step"], timers["snapshot"]
     world.ego_driver.before_step = timers["driver_before_step"]
@@ -244,11 +247,14 @@ def _instrumented(env):
     executor_module.plan, vehicle_module.road_profile = timers["planner"], timers["road_profile"]
     detector_timer = timers["detectors"]
     InfractionDetector.update = lambda self, *args: detector_timer(self, *args)  # the detector is per episode
+    scene_timer = timers["privileged_scene"]
+    PrivilegedScene.fields = lambda self, *args, **kwargs: scene_timer(self, *args, **kwargs)  # likewise
     try:
         yield timers
     finally:
         del world.sim.step, world.sim.snapshot, world.ego_driver.before_step, world.observer.occupancy
         InfractionDetector.update = detector_timer.fn
+        PrivilegedScene.fields = scene_timer.fn
         executor_module.plan, vehicle_module.road_profile = saved
 
 
@@ -603,7 +609,7 @@ NESTED_PARTS = {"planner": "driver_before_step"}
 
 
 def step_breakdown(env_row: dict, raw_row: dict) -> str:
-    """The timed parts of a continuous env run as shares of a sim step (plain text).
+    """The timed parts of an env run (either fidelity) as shares of a sim step (plain text).
 
     ``env_row``: a :func:`measure_env` result; ``raw_row``: :func:`measure_raw_sumo` of the same town in the
     same run. Per part: calls, mean ms per call, that in raw SUMO steps, ms per sim step and its share of the
@@ -625,15 +631,15 @@ def step_breakdown(env_row: dict, raw_row: dict) -> str:
     return "\n".join(lines)
 
 
-def profile_continuous(cfg: BenchConfig, town: str, seconds: float, top: int = 25) -> str:
-    """The continuous env's step path (expert agent) for ``seconds``: :func:`step_breakdown` against raw SUMO
+def profile_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float, top: int = 25) -> str:
+    """The env's step path in ``fidelity`` (expert agent) for ``seconds``: :func:`step_breakdown` against raw SUMO
     measured in the same run, then cProfile's top functions by own time (the breakdown is timed under the
     profiler, which inflates Python-heavy parts; compare its shares, not its absolute times)."""
     warm_up_kernels()  # the compile is not the step path
     raw = measure_raw_sumo(cfg, town)
     profiler = cProfile.Profile()
     profiler.enable()
-    row = measure_env(cfg, town, "continuous", seconds=seconds)
+    row = measure_env(cfg, town, fidelity, seconds=seconds)
     profiler.disable()
     out = io.StringIO()
     pstats.Stats(profiler, stream=out).sort_stats("tottime").print_stats(top)
@@ -644,7 +650,7 @@ def profile_continuous(cfg: BenchConfig, town: str, seconds: float, top: int = 2
 def _cmd_bench(args: argparse.Namespace) -> int:
     cfg = BenchConfig.quick() if args.quick else BenchConfig()
     if args.profile:
-        print(profile_continuous(cfg, args.town or cfg.towns[0], args.profile))
+        print(profile_env(cfg, args.town or cfg.towns[0], args.fidelity, args.profile))
         return 0
     result = run_benchmark(cfg, progress=not args.json)
     if args.out:
@@ -665,7 +671,9 @@ def add_commands(subparsers) -> None:
     p.add_argument("--check", action="store_true", help="exit 1 when a target fails (without it: 0 after printing)")
     p.add_argument("--out", default=None, help="also write the JSON result to this file")
     p.add_argument("--profile", type=float, default=0.0, metavar="SECONDS",
-                   help="instead: time the parts of the continuous env's step against raw SUMO and cProfile it "
-                        "for SECONDS; print both")
+                   help="instead: time the parts of the env's step against raw SUMO and cProfile it for SECONDS; "
+                        "print both")
     p.add_argument("--town", default=None, help="the town of --profile (default: the first measured town)")
+    p.add_argument("--fidelity", choices=("continuous", "event"), default="continuous",
+                   help="the fidelity of --profile (default: continuous)")
     p.set_defaults(func=_cmd_bench)
