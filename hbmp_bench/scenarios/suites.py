@@ -87,8 +87,11 @@ register_suite(
         episodes_per_task=40,
         seed=2020,
         end_on_violation=True,
+        timeout_speed_kmh=5.0,
+        timeout_extra_s=20.0,
         description="The HBMP paper's protocol: 40 episodes per task, the episode ends at the goal or "
-        "at the first rule violation.",
+        "at the first rule violation (a red light included); timeout at 5 km/h + 20 s, NoCrash's rule for "
+        "drivers that stop at red lights (the paper gives none).",
     )
 )
 for _density in ("empty", "regular", "dense"):
