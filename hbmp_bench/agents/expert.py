@@ -99,13 +99,15 @@ class Timing:
     """How long the expert assumes a behavior may run before it decides again [s], and how a chain
     of ``speed_down`` stops.
 
-    Continuous fidelity: a behavior ends once the planner has converged to its lane (and, for
-    speed_up / speed_down, to its speed), after at least 1 s; speed_up, speed_down and keep after
-    at most ``ExecutorConfig.lane_keeping_max_duration`` (2 s), a lane change after at most
-    ``max_duration`` (8 s). ``hard_s`` / ``lane_change_hard_s`` are those longest runs, checked
-    against the lines the planner does not see (stop lines, conflict areas); the typical runs
-    (``keep_s``, ``speed_up_s``, ``lane_change_s``) against the actors the planner itself brakes
-    for. Event fidelity: every behavior lasts one decision period.
+    Continuous fidelity: a behavior ends once the planner has converged (a lane change to its
+    lane, speed_up / speed_down to their speed, keep at once), after at least
+    ``ExecutorConfig.min_duration`` (1 s); speed_up and speed_down after at most
+    ``lane_keeping_max_duration`` (2 s), a lane change after at most ``max_duration`` (8 s).
+    ``hard_s`` / ``keep_hard_s`` / ``lane_change_hard_s`` are those longest runs (keep: exactly
+    1 s), checked against the lines the planner does not see (stop lines, conflict areas); the
+    typical runs (``keep_s``, ``speed_up_s``, ``lane_change_s``) against the actors the planner
+    itself brakes for (``keep_s`` longer than keep runs: room for a leader that brakes). Event
+    fidelity: every behavior lasts one decision period.
     """
 
     keep_s: float
@@ -115,6 +117,7 @@ class Timing:
     lane_change_hard_s: float
     stop_decel: float
     accel: float
+    keep_hard_s: float
     crawl_s: float = 0.1
     """How long a lane change begun below 2 m/s may run (slow to converge sideways) [s]."""
 
@@ -125,10 +128,10 @@ class Timing:
         if continuous:
             return Timing(keep_s=1.5, speed_up_s=executor.lane_keeping_max_duration, lane_change_s=3.0,
                           hard_s=executor.lane_keeping_max_duration, lane_change_hard_s=executor.max_duration,
-                          stop_decel=3.0, accel=INF, crawl_s=executor.max_duration)
+                          stop_decel=3.0, accel=INF, keep_hard_s=executor.min_duration, crawl_s=executor.max_duration)
         p = max(period_s, 0.1)
         return Timing(keep_s=p, speed_up_s=p, lane_change_s=p, hard_s=p, lane_change_hard_s=p, stop_decel=3.5,
-                      accel=2.6, crawl_s=p)
+                      accel=2.6, keep_hard_s=p, crawl_s=p)
 
 
 @register_agent("expert")
@@ -199,15 +202,15 @@ class ExpertAgent:
     def _meets(targets: list[Target], v: float, v_to: float, hold_s: float, t: Timing, tolerance: float,
                hard_s: float | None = None) -> bool:
         """Whether a behavior that takes the speed from ``v`` to ``v_to`` and holds it for
-        ``hold_s`` [s] (at least ``hard_s``, default ``t.hard_s``, for hard targets) still lets a
-        chain of speed_down meet every target; a speed cap may be exceeded by ``tolerance`` [m/s],
-        a stop never."""
+        ``hold_s`` [s] (its longest run ``hard_s``, default ``t.hard_s``, for hard targets) still
+        lets a chain of speed_down meet every target; a speed cap may be exceeded by ``tolerance``
+        [m/s], a stop never."""
         hard_s = t.hard_s if hard_s is None else hard_s
         v_then = 0.0 if t.hard_s > 1.0 else 8.0  # decisions every 0.1 s keep speeding up
         for g in targets:
             if v_to <= g.speed_mps + (tolerance if g.speed_mps > 0.0 else 0.0) or g.passes_outside(v, v_to, v_then):
                 continue
-            travel = max(v, v_to) * (max(hold_s, hard_s) if g.hard else hold_s)
+            travel = max(v, v_to) * (hard_s if g.hard else hold_s)
             if g.at_m <= 0.0 or travel + (v_to ** 2 - g.speed_mps ** 2) / (2.0 * t.stop_decel) > g.at_m:
                 return False
         return True
@@ -435,6 +438,6 @@ class ExpertAgent:
         if v_up > v + 0.05 and self._meets(targets, v, v_up, t.speed_up_s, t, tolerance=1.0):
             return SPEED_UP
         creeping = 0.05 < v < 1.0 and t.crawl_s > 1.0  # the planner converges slowly at a crawl: stop instead
-        if not creeping and self._meets(targets, v, v, t.keep_s, t, tolerance=0.3):
+        if not creeping and self._meets(targets, v, v, t.keep_s, t, tolerance=0.3, hard_s=t.keep_hard_s):
             return KEEP
         return SPEED_DOWN

@@ -10,6 +10,7 @@ import pytest
 from hbmp_bench.agents import agent_env_kwargs
 from hbmp_bench.agents.expert import CHANGE_LEFT, CHANGE_RIGHT, KEEP, SPEED_DOWN, SPEED_UP, ExpertAgent, Timing
 from hbmp_bench.envs.observation import LANE_WIDTH_M, ObservationConfig
+from hbmp_bench.planning.executor import ExecutorConfig
 
 GRID = ObservationConfig()
 INF = float("inf")
@@ -69,8 +70,8 @@ def test_speed_limit_reaches_a_turn_at_turn_speed():
 
 # -------------------------------------------------------------------- red light
 def test_red_light_stops_before_the_line():
-    # keeping 8 m/s for a behavior (2 s, 16 m) leaves 7 m to stop in: too little
-    assert act(**light("r", 25.0), speed_mps=8.0) == SPEED_DOWN
+    # keeping 8 m/s for a keep (1 s, 8 m) leaves 10 m to stop in: too little (8²/6 = 10.7 m)
+    assert act(**light("r", 20.0), speed_mps=8.0) == SPEED_DOWN
     assert act(**light("r", 40.0), speed_mps=8.0) in (KEEP, SPEED_UP)
     # standing before a red that stays red: waits, and does not creep into the junction
     assert act(**light("r", 3.0, ((0.0, "r"), (20.0, "G"))), speed_mps=0.0) == KEEP
@@ -85,7 +86,7 @@ def test_red_light_drives_off_when_it_turns_green_before_the_ego_gets_there():
 
 def test_red_light_stops_for_a_yellow_it_can_stop_for_and_goes_through_one_it_cannot():
     yellow = ((0.0, "y"), (3.0, "r"), (20.0, "G"))
-    assert act(**light("y", 25.0, yellow), speed_mps=8.0) == SPEED_DOWN  # 16 m for 2 s, 8²/6 = 11 m of braking
+    assert act(**light("y", 20.0, yellow), speed_mps=8.0) == SPEED_DOWN  # 8 m for a keep, 8²/6 = 11 m of braking
     assert act(**light("y", 8.0, yellow), speed_mps=12.0) != SPEED_DOWN  # 24 m of braking: go through
     assert "red_light" not in rules(**light("y", 8.0, yellow), speed_mps=12.0)
 
@@ -97,31 +98,31 @@ def test_red_light_waits_at_the_line_through_a_yellow_when_standing():
 
 def test_red_light_slows_for_a_green_that_turns_red_before_the_ego_gets_there():
     turning = ((0.0, "G"), (2.0, "y"), (5.0, "r"), (25.0, "G"))
-    assert act(**light("G", 40.0, turning), speed_mps=12.0) == SPEED_DOWN  # there in ~3.3 s: yellow or red
+    assert act(**light("G", 35.0, turning), speed_mps=12.0) == SPEED_DOWN  # there in ~2.9 s: yellow or red
     assert act(**light("G", 15.0, turning), speed_mps=12.0) in (KEEP, SPEED_UP)  # there in 1.3 s: green
 
 
 def test_red_light_also_stops_for_a_light_beyond_the_next_one():
-    # in a junction at 8 m/s: the next light, 20 m ahead, stays green; the one after it, 50 m ahead,
-    # is red for a while: a behavior that may run 2 s must not take the ego past it
+    # in a junction at 8 m/s: the next light, 12 m ahead, stays green; the one after it, 19 m ahead,
+    # is red for a while: a keep (1 s) must not take the ego where it can no longer stop before it
     green = ((0.0, "G"), (40.0, "y"))
     red = ((0.0, "r"), (30.0, "G"))
-    scene = dict(in_junction=True, stop_distance_m=20.0, junction_exit_m=5.0, speed_mps=8.0)
-    assert act(**scene, lights_ahead=((20.0, "G", green),)) in (KEEP, SPEED_UP)
-    assert act(**scene, lights_ahead=((20.0, "G", green), (25.0, "r", red))) == SPEED_DOWN
+    scene = dict(in_junction=True, stop_distance_m=12.0, junction_exit_m=5.0, speed_mps=8.0)
+    assert act(**scene, lights_ahead=((12.0, "G", green),)) in (KEEP, SPEED_UP)
+    assert act(**scene, lights_ahead=((12.0, "G", green), (19.0, "r", red))) == SPEED_DOWN
 
 
 def test_red_light_without_privileged_lights_reads_the_lane_light():
-    obs, info = situation(light="r", stop_distance_m=25.0, speed_mps=8.0)
+    obs, info = situation(light="r", stop_distance_m=20.0, speed_mps=8.0)
     del info["scene"]["lights_ahead"]
     assert ExpertAgent().act(obs, info) == SPEED_DOWN
 
 
 def test_red_light_plans_stops_with_the_behaviors_the_fidelity_runs():
-    # 25 m before a red at 8 m/s: a behavior of the motion planner may run 8 s, so it brakes now;
-    # with SUMO's 0.1 s decisions it need not brake yet (8²/7 = 9 m), only when the line comes close
-    assert act(**light("r", 25.0), speed_mps=8.0) == SPEED_DOWN
-    assert act(**light("r", 25.0), speed_mps=8.0, fidelity="event", duration_s=0.1) != SPEED_DOWN
+    # 20 m before a red at 8 m/s: a keep of the motion planner runs 1 s, so it brakes now; with
+    # SUMO's 0.1 s decisions it need not brake yet (8²/7 = 9 m), only when the line comes close
+    assert act(**light("r", 20.0), speed_mps=8.0) == SPEED_DOWN
+    assert act(**light("r", 20.0), speed_mps=8.0, fidelity="event", duration_s=0.1) != SPEED_DOWN
     assert act(**light("r", 10.0), speed_mps=8.0, fidelity="event", duration_s=0.1) == SPEED_DOWN
     # standing 2 m before the line of a green light with yellow in 6 s: drive off (speeding up
     # 0.26 m/s per decision, it is well past the line by then)
@@ -184,9 +185,9 @@ def test_yield_passes_a_foe_that_gives_way_or_is_held_by_its_light():
 
 
 def test_yield_slows_before_the_junction_for_a_foe_arriving_with_the_ego():
-    approach = dict(stop_distance_m=30.0, junction_exit_m=45.0, speed_mps=10.0)
-    assert act(**approach, junction_foes=(foe(36.0, 40.0, 10.0),)) == SPEED_DOWN
-    assert act(**approach, junction_foes=(foe(36.0, 300.0, 10.0),)) in (KEEP, SPEED_UP)
+    approach = dict(stop_distance_m=25.0, junction_exit_m=40.0, speed_mps=10.0)
+    assert act(**approach, junction_foes=(foe(31.0, 35.0, 10.0),)) == SPEED_DOWN
+    assert act(**approach, junction_foes=(foe(31.0, 300.0, 10.0),)) in (KEEP, SPEED_UP)
     # a conflict at the junction after the next one is judged once the ego has crossed this one
     assert act(**approach, junction_foes=(foe(60.0, 60.0, 10.0),)) in (KEEP, SPEED_UP)
 
@@ -258,16 +259,29 @@ def test_the_expert_stops_rather_than_creeps():
 
 
 def test_it_plans_with_the_longest_run_of_each_behavior():
-    """With the motion planner, speed_up / speed_down / keep run at most 2 s and a lane change 8 s:
-    40 m before a red at 6 m/s it may keep its speed (12 m, then a 6 m stop) but not begin a lane
-    change (48 m), unless the target lane's light is green long enough."""
+    """With the motion planner, speed_up / speed_down run at most 2 s, keep exactly 1 s and a lane
+    change at most 8 s: 40 m before a red at 6 m/s it may keep its speed (6 m, then a 6 m stop) but
+    not begin a lane change (48 m), unless the target lane's light is green long enough."""
     t = Timing.for_period(1.0, continuous=True)
-    assert (t.hard_s, t.lane_change_hard_s) == (2.0, 8.0)
+    assert (t.hard_s, t.keep_hard_s, t.lane_change_hard_s) == (2.0, 1.0, 8.0)
     red = light("r", 40.0)
     assert act(**red, speed_mps=6.0) in (KEEP, SPEED_UP)
     assert act(**red, speed_mps=6.0, route_lane_offset=1) != CHANGE_LEFT
     green = (40.0, "G", ((0.0, "G"), (30.0, "y"), (34.0, "r")))
     assert act(**red, speed_mps=6.0, route_lane_offset=1, route_lane_light=green) == CHANGE_LEFT
+
+
+def test_it_checks_stop_lines_over_the_run_of_the_behavior_it_chooses():
+    """A keep ends after exactly ``min_duration`` (1 s), a speed_up may run 2 s: 25 m before a red
+    at 8 m/s it may keep its speed (8 m, then a 10.7 m stop, before the line's 23 m) but not speed
+    up to 10 m/s (up to 20 m, then a 16.7 m stop); 20 m before the red it brakes (18.7 > 18 m)."""
+    assert Timing.for_period(1.0, continuous=True).keep_hard_s == ExecutorConfig().min_duration
+    assert act(**light("r", 25.0), speed_mps=8.0) == KEEP
+    assert act(**light("r", 20.0), speed_mps=8.0) == SPEED_DOWN
+    # the same for a yield line (1 m before the junction) with a foe arriving with the ego
+    approach = dict(stop_distance_m=25.0, junction_exit_m=50.0, speed_mps=8.0)
+    assert act(**approach, junction_foes=(foe(35.0, 35.0, 10.0),)) == KEEP
+    assert act(**{**approach, "stop_distance_m": 19.0}, junction_foes=(foe(29.0, 29.0, 10.0),)) == SPEED_DOWN
 
 
 def test_standing_before_a_red_line_it_moves_up_to_the_line():
