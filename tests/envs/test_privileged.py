@@ -95,6 +95,40 @@ def test_signal_schedule_predicts_the_link_signal_seen_in_sumo():
     assert [t for t, _ in schedule[1:len(changes) + 1]] == pytest.approx([t for t, _ in changes], abs=0.11)
 
 
+def test_lights_ahead_off_the_route_are_the_ones_the_detectors_judge():
+    """Past a goal it missed, on the route's continuation (no edge of the route), the ego still sees
+    the light ending its lane: the one the red-light detector judges. Town03 NavigationDynamic 4 and
+    39 (continuous) entered a short goal edge one lane off, drove on and ran the next red blind."""
+    from types import SimpleNamespace
+
+    from hbmp_bench.envs.vehicle import GoalRoute, followed_stop_line
+    from hbmp_bench.metrics import LaneLocator
+    from hbmp_bench.scenarios import road_network, suite_episodes
+
+    net = road_network("Town01")
+    locator = LaneLocator(net)
+    episode = suite_episodes("hbmp", "Town01", "NavigationDynamic")[0]
+    lane = next(lane for lane in net.lanes  # a signalised lane off the route
+                if net.lanes[lane].edge not in episode.route and locator.stop_line(lane, None) is not None)
+    sim = SimpleNamespace(light_state=lambda tls, index: "r")
+    route = GoalRoute(episode, "continuous")
+    pos = net.lane(lane).length - 20.0  # 20 m before the stop line
+    xy, ahead = net.position(lane, pos), net.position(lane, pos + 1.0)
+    yaw = float(np.arctan2(*(ahead - xy)[::-1]))
+    vehicle = SimpleNamespace(shared=SimpleNamespace(net=net, sim=sim, locator=locator), followed_lane=lane,
+                              state=SimpleNamespace(lane=lane, lane_pos=pos, xy=xy, yaw=yaw),
+                              front=xy + 2.25 * np.array([np.cos(yaw), np.sin(yaw)]))
+    vehicle.next_edges = lambda count=3: route.edges[route.index() + 1: route.index() + 1 + count]
+    route.v = vehicle
+    route._set(episode.route)
+
+    judged = followed_stop_line(sim, locator, lane, next(iter(vehicle.next_edges(1)), None))
+    lights = route._route_lights()
+    assert judged is not None and len(lights) == 1
+    assert (lights[0].state, lights[0].distance) == ("r", pytest.approx(20.0 - 2.25, abs=0.3))
+    assert (lights[0].tls, lights[0].link_index) == locator.stop_line(lane, next(iter(vehicle.next_edges(1)), None))[2:]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("fidelity", ["continuous", "event"])
 def test_privileged_fields_in_a_real_episode(fidelity):
