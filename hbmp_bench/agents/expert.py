@@ -44,6 +44,7 @@ expert plans with 3.0 and 3.5 m/s².
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -53,6 +54,7 @@ from hbmp_bench.agents.base import PRIVILEGED_OPTION, register_agent
 from hbmp_bench.envs.observation import LANE_WIDTH_M, ObservationConfig
 from hbmp_bench.planning.behaviors import Behavior, BehaviorConfig, reference_speed
 from hbmp_bench.planning.executor import ExecutorConfig
+from hbmp_bench.planning.planner import PlannerConfig
 
 SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = (int(b) for b in Behavior)
 EGO_LENGTH_M = 4.5
@@ -84,9 +86,9 @@ class Target:
 
     def passes_outside(self, v: float, v_to: float, v_then: float = 0.0) -> bool:
         """Whether a car at ``v`` [m/s] that goes to ``v_to`` and holds it misses the window: it
-        leaves the zone before it (accelerating gently, at 1.5 m/s², to ``v_to`` or to ``v_then``
-        where the next decisions come soon enough to speed up further) or gets there after it
-        (at ``v_to`` at once)."""
+        leaves the zone before it (accelerating gently, at 1.5 m/s², to ``v_to`` or to ``v_then``,
+        the speed the next decisions' speed_up reach: :attr:`Timing.chain_mps`) or gets there after
+        it (at ``v_to`` at once)."""
         if self.from_s <= 0.0 and self.until_s == INF:
             return False
         leave_s = ExpertAgent._time_to(self.at_m + self.zone_m, v, accel=1.5, v_max=max(v_to, v_then))
@@ -118,6 +120,9 @@ class Timing:
     stop_decel: float
     accel: float
     keep_hard_s: float
+    chain_mps: float = 0.0
+    """The speed a chain of speed_up decisions reaches while the ego leaves a zone ahead [m/s]
+    (:meth:`Target.passes_outside`; 0: no further speed_up is counted on)."""
     crawl_s: float = 0.1
     """How long a lane change begun below 2 m/s may run (slow to converge sideways) [s]."""
 
@@ -149,6 +154,7 @@ class ExpertAgent:
         grid: the M_t grid it reads (must match the environment's).
         behavior: the v_ref rule of speed_up / speed_down (must match the environment's).
         executor: the motion planner's behavior timing (must match the environment's).
+        planner: the motion planner's curve speed limits (must match the environment's).
 
     Attributes:
         env_kwargs: the env options it asks for: ``privileged=True`` (the privileged scene fields;
@@ -160,7 +166,8 @@ class ExpertAgent:
     def __init__(self, cruise_fraction: float = 0.9, turn_speed_mps: float = 6.0, stop_margin_m: float = 2.0,
                  standstill_gap_m: float = 3.0, time_gap_s: float = 1.2, leader_decel: float = 4.5,
                  foe_margin_s: float = 1.5, grid: ObservationConfig | None = None,
-                 behavior: BehaviorConfig | None = None, executor: ExecutorConfig | None = None):
+                 behavior: BehaviorConfig | None = None, executor: ExecutorConfig | None = None,
+                 planner: PlannerConfig | None = None):
         self.cruise_fraction = cruise_fraction
         self.turn_speed_mps = turn_speed_mps
         self.stop_margin_m = stop_margin_m
@@ -171,6 +178,7 @@ class ExpertAgent:
         self.grid = grid or ObservationConfig()
         self.behavior = behavior or BehaviorConfig()
         self.executor = executor or ExecutorConfig()
+        self.planner = planner or PlannerConfig()
         self.env_kwargs = {PRIVILEGED_OPTION: True}
         self._stuck_s = 0.0
 
@@ -182,7 +190,24 @@ class ExpertAgent:
         period = float(info.get("duration_s", 0.1))
         fidelity = scene.get("fidelity")
         continuous = fidelity == "continuous" if fidelity else period > 0.2
-        return Timing.for_period(period, continuous, self.executor)
+        t = Timing.for_period(period, continuous, self.executor)
+        return dataclasses.replace(t, chain_mps=self._chain_speed(scene, continuous))
+
+    def _chain_speed(self, scene: dict, continuous: bool) -> float:
+        """The speed [m/s] a chain of speed_up decisions reaches while the ego leaves a zone ahead
+        (a crossing, a conflict area), at most 8 m/s: with SUMO's 0.1 s decisions 8; with the motion
+        planner (a decision about every second) also at most the cruise speed and the planner's
+        curve speed cap on the sharpest curvature of the path ahead (``curvature_ahead``), 0 where
+        that is unknown."""
+        if not continuous:
+            return 8.0
+        kappa = scene.get("curvature_ahead")
+        if kappa is None:
+            return 0.0
+        cap = min(8.0, self.cruise_fraction * scene["speed_limit_mps"])
+        if kappa > 1e-6:
+            cap = min(cap, math.sqrt(self.planner.curve_lat_accel / kappa), self.planner.yaw_rate_max / kappa)
+        return cap
 
     @staticmethod
     def _time_to(distance_m: float, v: float, accel: float = 2.0, v_max: float = INF) -> float:
@@ -206,9 +231,8 @@ class ExpertAgent:
         lets a chain of speed_down meet every target; a speed cap may be exceeded by ``tolerance``
         [m/s], a stop never."""
         hard_s = t.hard_s if hard_s is None else hard_s
-        v_then = 0.0 if t.hard_s > 1.0 else 8.0  # decisions every 0.1 s keep speeding up
         for g in targets:
-            if v_to <= g.speed_mps + (tolerance if g.speed_mps > 0.0 else 0.0) or g.passes_outside(v, v_to, v_then):
+            if v_to <= g.speed_mps + (tolerance if g.speed_mps > 0.0 else 0.0) or g.passes_outside(v, v_to, t.chain_mps):
                 continue
             travel = max(v, v_to) * (hard_s if g.hard else hold_s)
             if g.at_m <= 0.0 or travel + (v_to ** 2 - g.speed_mps ** 2) / (2.0 * t.stop_decel) > g.at_m:

@@ -219,6 +219,21 @@ def test_pedestrians_waits_for_one_about_to_step_onto_a_crossing_of_its_path():
         assert act(**at_line, crossings=(other,)) == SPEED_UP
 
 
+def test_pedestrians_it_turns_over_a_crossing_before_a_waiting_pedestrian_can_step_onto_it():
+    """Standing at the line, a pedestrian waits 11 m from the crossing's stretch of its path (on it
+    in 4.7 s at a brisk 1.5 m/s, less a second). Driving off (1.5 m/s² to the speed a chain of
+    speed_up reaches) clears the stretch in 4.2 s on a gentle curve, where the planner's curve cap
+    (2 m/s², 0.6 rad/s at 0.05 1/m: 6.3 m/s) allows it; not in a tight one (0.5 1/m: 1.2 m/s), nor
+    where the path's curvature is unknown (no further speed_up counted on: 7.4 s at 2 m/s)."""
+    crossing = {"ego_dist_m": 5.0, "ego_exit_m": 9.0, "signal": "G", "waiting_m": (11.0,)}
+    at_line = dict(stop_distance_m=2.0, junction_exit_m=20.0, speed_mps=0.0, crossings=(crossing,))
+    assert act(**at_line, curvature_ahead=0.05) == SPEED_UP
+    assert act(**at_line, curvature_ahead=0.5) == KEEP
+    assert act(**at_line) == KEEP
+    # SUMO's 0.1 s decisions keep speeding up (to 8 m/s)
+    assert act(**at_line, fidelity="event", duration_s=0.1) == SPEED_UP
+
+
 def test_pedestrians_on_a_crossing_are_waited_for_before_the_crossing_not_on_it():
     # a turn over a crossing whose stretch of the path runs 5..11 m ahead; a pedestrian walks it
     # obliquely to the path: 8 m ahead, 5 m to the left, coming across (Town04 NavigationDynamic 6)
