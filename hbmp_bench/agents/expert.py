@@ -25,8 +25,9 @@ is taken (a time window):
                          ego is; a standing foe is passed unless it has the right of way and the ego
                          has not entered the junction yet; a foe held by a red light is passed.
 ``_rule_pedestrians``    stop before a pedestrian who is in the ego's path or walks into it while the
-                         ego would pass (before the crossing, where that is on a crossing of its path:
-                         a car standing on a crossing is in the way of everyone on it), and for those
+                         ego would pass, unless a red signal holds them at the kerb of a crossing
+                         (before the crossing, where that is on a crossing of its path: a car
+                         standing on a crossing is in the way of everyone on it), and for those
                          waiting at a crossing of its path whose signal lets them go.
 ``_rule_route_lane``     (a lane change, not a speed) move towards the lane that continues the route as
                          soon as the target lane is free and the change fits before the next stop;
@@ -348,7 +349,7 @@ class ExpertAgent:
     def _rule_pedestrians(self, scene: dict, t: Timing) -> list[Target]:
         out = []
         ahead = [c for c in scene.get("crossings", ()) if c["ego_dist_m"] >= 0.5]
-        for s, d, v_s, v_d in scene.get("pedestrians", ()):
+        for s, d, v_s, v_d, held in scene.get("pedestrians", ()):
             if s < 0.5:
                 continue  # beside or behind the front bumper: driving on takes the ego away
             # the ego's half width and a margin: wider for a walking pedestrian than for one who
@@ -357,7 +358,7 @@ class ExpertAgent:
             if abs(d) < w:
                 p_in, meet = 0.0, s
                 p_out = (math.copysign(w, v_d) - d) / v_d if abs(v_d) > 0.2 else INF
-            elif d * v_d < 0.0 and abs(v_d) > 0.2:
+            elif d * v_d < 0.0 and abs(v_d) > 0.2 and not held:  # (a red signal holds it at the kerb)
                 p_in, p_out = (abs(d) - w) / abs(v_d), (abs(d) + w) / abs(v_d)
                 meet = s - v_s * d / v_d  # where its walk meets the path
             else:

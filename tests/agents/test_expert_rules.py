@@ -194,18 +194,29 @@ def test_yield_slows_before_the_junction_for_a_foe_arriving_with_the_ego():
 
 # ------------------------------------------------------------------ pedestrians
 def test_pedestrians_stops_for_one_walking_into_the_path():
-    crossing = (15.0, -4.0, 0.0, 1.3)  # 15 m ahead, 4 m to the right, walking left across
+    crossing = (15.0, -4.0, 0.0, 1.3, False)  # 15 m ahead, 4 m to the right, walking left across
     assert act(pedestrians=(crossing,), speed_mps=8.0) == SPEED_DOWN
-    assert act(pedestrians=((15.0, 0.3, 0.0, 0.0),), speed_mps=8.0) == SPEED_DOWN  # standing in the path
+    assert act(pedestrians=((15.0, 0.3, 0.0, 0.0, False),), speed_mps=8.0) == SPEED_DOWN  # standing in the path
 
 
 def test_pedestrians_ignores_walkers_beside_the_path_and_waiting_at_the_kerb():
-    along = (15.0, -4.0, 1.3, 0.0)  # on the sidewalk, walking along the road
-    kerb = (4.0, -1.75, 0.0, 0.0)  # standing at the kerb, at the lane's edge
-    leaving = (15.0, 2.5, 0.0, 1.3)  # left of the path, walking away from it
+    along = (15.0, -4.0, 1.3, 0.0, False)  # on the sidewalk, walking along the road
+    kerb = (4.0, -1.75, 0.0, 0.0, False)  # standing at the kerb, at the lane's edge
+    leaving = (15.0, 2.5, 0.0, 1.3, False)  # left of the path, walking away from it
     for p in (along, kerb, leaving):
         assert "pedestrian" not in rules(pedestrians=(p,), speed_mps=8.0)
     assert act(pedestrians=(along, kerb, leaving), speed_mps=8.0) == SPEED_UP
+
+
+def test_pedestrians_passes_one_a_red_signal_holds_at_the_kerb():
+    """Standing at the line on green: a pedestrian 10 m ahead, 4 m to the right, walks diagonally
+    towards the crossing it turns over (Town02 NavigationDynamic 19, at a corner): waited for,
+    unless the crossing's red signal holds them at the kerb. In the path, they are waited for."""
+    crossing = {"ego_dist_m": 5.0, "ego_exit_m": 10.0, "signal": "r", "waiting_m": (4.0,)}
+    at_line = dict(stop_distance_m=2.0, junction_exit_m=20.0, speed_mps=0.0, crossings=(crossing,))
+    assert act(**at_line, pedestrians=((10.0, -4.0, -1.0, 0.7, False),)) == KEEP
+    assert act(**at_line, pedestrians=((10.0, -4.0, -1.0, 0.7, True),)) == SPEED_UP
+    assert act(**at_line, pedestrians=((6.0, -0.5, 0.0, 1.0, True),)) == KEEP
 
 
 def test_pedestrians_waits_for_one_about_to_step_onto_a_crossing_of_its_path():
@@ -238,7 +249,7 @@ def test_pedestrians_on_a_crossing_are_waited_for_before_the_crossing_not_on_it(
     # a turn over a crossing whose stretch of the path runs 5..11 m ahead; a pedestrian walks it
     # obliquely to the path: 8 m ahead, 5 m to the left, coming across (Town04 NavigationDynamic 6)
     crossing = {"ego_dist_m": 5.0, "ego_exit_m": 11.0, "signal": "G", "waiting_m": ()}
-    walker = (8.0, 5.0, -0.3, -1.2)
+    walker = (8.0, 5.0, -0.3, -1.2, False)
     stops = [g for g in ExpertAgent().targets(*situation(pedestrians=(walker,), crossings=(crossing,), speed_mps=4.0))
              if g.rule == "pedestrian"]
     assert [g.at_m for g in stops] == [pytest.approx(5.0 - ExpertAgent().stop_margin_m)]
@@ -262,7 +273,7 @@ def test_route_lane_changes_before_the_goal_on_the_goal_edge():
 
 
 def test_pedestrians_beside_the_ego_do_not_stop_it():
-    beside = (-1.5, -1.2, 0.0, 1.3)  # next to the car, behind its front bumper
+    beside = (-1.5, -1.2, 0.0, 1.3, False)  # next to the car, behind its front bumper
     assert "pedestrian" not in rules(pedestrians=(beside,), speed_mps=3.0)
 
 

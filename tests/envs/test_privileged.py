@@ -52,9 +52,13 @@ def test_path_actors_reports_pedestrians_near_the_path_with_their_velocity():
     )
     out = path_actors(_straight(), np.zeros(2), EGO_L, EGO_W, xy, yaw, speed, length, width, ped)
     assert math.isinf(out["leader_gap_m"])
-    (s0, d0, vs0, vd0), (s1, d1, vs1, vd1) = out["pedestrians"]
+    (s0, d0, vs0, vd0, held0), (s1, d1, vs1, vd1, held1) = out["pedestrians"]
     assert (s0, d0) == pytest.approx((15.0 - 2.25, -4.0)) and (vs0, vd0) == pytest.approx((0.0, 1.3), abs=1e-6)
     assert (s1, d1) == pytest.approx((25.0 - 2.25, 5.0)) and (vs1, vd1) == pytest.approx((1.2, 0.0), abs=1e-6)
+    assert not held0 and not held1
+    held = path_actors(_straight(), np.zeros(2), EGO_L, EGO_W, xy, yaw, speed, length, width, ped,
+                       np.array([True, False, True]))
+    assert [p[4] for p in held["pedestrians"]] == [True, False]
 
 
 def test_path_actors_follows_the_path_around_a_corner():
