@@ -475,8 +475,9 @@ class GoalRoute:
         (distance from the front bumper to the stop line [m]); with ``first_only`` the nearest
         alone (R_t's). At the end of the followed lane, its link's (the one the detectors judge),
         also off the route (past a goal it missed, on the route's continuation); beyond, those of
-        the links the route takes. SUMO's own next lights (``getNextTLS``) follow SUMO's map
-        matching of a pushed pose, which may jump to another visit of a junction."""
+        the links the route takes, and beyond the route's last edge SUMO's next light (not R_t's:
+        SUMO's own next lights, ``getNextTLS``, follow SUMO's map matching of a pushed pose, which
+        may jump to another visit of a junction; past the route's end there is no other)."""
         v = self.v
         net, sim, lane = v.shared.net, v.shared.sim, v.followed_lane
         if lane not in net.lanes:
@@ -488,6 +489,10 @@ class GoalRoute:
         ahead = self._to_stop_line(lane)
         if fixed is not None and ahead > 0.0:
             out.append(LightAhead(fixed[2], fixed[3], ahead, sim.light_state(fixed[2], fixed[3])))
+        if nxt is None and not first_only:  # the route's last edge: past a goal it missed, SUMO drives
+            light = sim.light_ahead(v.id)  # on along the route's continuation, towards its next light
+            if light is not None and all((a.tls, a.link_index) != (light.tls, light.link_index) for a in out):
+                out = sorted([*out, light], key=lambda a: a.distance)
         if k is None or nxt is None or (first_only and out):
             return out
         own = next((c for c in net.connections[net.lane(lane).edge] if c.from_lane == lane and c.to_edge == nxt), None)

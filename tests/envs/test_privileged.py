@@ -108,18 +108,19 @@ def test_lights_ahead_off_the_route_are_the_ones_the_detectors_judge():
     from hbmp_bench.envs.vehicle import GoalRoute, followed_stop_line
     from hbmp_bench.metrics import LaneLocator
     from hbmp_bench.scenarios import road_network, suite_episodes
+    from hbmp_bench.sim.sumo import LightAhead
 
     net = road_network("Town01")
     locator = LaneLocator(net)
     episode = suite_episodes("hbmp", "Town01", "NavigationDynamic")[0]
     lane = next(lane for lane in net.lanes  # a signalised lane off the route
                 if net.lanes[lane].edge not in episode.route and locator.stop_line(lane, None) is not None)
-    sim = SimpleNamespace(light_state=lambda tls, index: "r")
+    sim = SimpleNamespace(light_state=lambda tls, index: "r", light_ahead=lambda vehicle_id: None)
     route = GoalRoute(episode, "continuous")
     pos = net.lane(lane).length - 20.0  # 20 m before the stop line
     xy, ahead = net.position(lane, pos), net.position(lane, pos + 1.0)
     yaw = float(np.arctan2(*(ahead - xy)[::-1]))
-    vehicle = SimpleNamespace(shared=SimpleNamespace(net=net, sim=sim, locator=locator), followed_lane=lane,
+    vehicle = SimpleNamespace(id="ego", shared=SimpleNamespace(net=net, sim=sim, locator=locator), followed_lane=lane,
                               state=SimpleNamespace(lane=lane, lane_pos=pos, xy=xy, yaw=yaw),
                               front=xy + 2.25 * np.array([np.cos(yaw), np.sin(yaw)]))
     vehicle.next_edges = lambda count=3: route.edges[route.index() + 1: route.index() + 1 + count]
@@ -131,6 +132,17 @@ def test_lights_ahead_off_the_route_are_the_ones_the_detectors_judge():
     assert judged is not None and len(lights) == 1
     assert (lights[0].state, lights[0].distance) == ("r", pytest.approx(20.0 - 2.25, abs=0.3))
     assert (lights[0].tls, lights[0].link_index) == locator.stop_line(lane, next(iter(vehicle.next_edges(1)), None))[2:]
+
+    # on the route's last edge, past its end (in the junction after a goal it missed): SUMO's next
+    # light on the route's continuation, for the expert (R_t keeps the route's lights only)
+    goal = episode.goal_lane
+    pos = net.lane(goal).length
+    xy = net.position(goal, pos)
+    vehicle.followed_lane, vehicle.state = goal, SimpleNamespace(lane=":junction", lane_pos=0.0, xy=xy, yaw=0.0)
+    vehicle.front = xy
+    sumo_next = LightAhead("tls", 3, 25.0, "r")
+    sim.light_ahead = lambda vehicle_id: sumo_next
+    assert sumo_next in route._route_lights() and sumo_next not in route._route_lights(first_only=True)
 
 
 @pytest.mark.slow
