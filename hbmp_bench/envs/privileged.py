@@ -30,9 +30,11 @@ of the actors near the path), and
   lane_error_m, heading_error_rad, curvature_ahead
                    continuous fidelity only: the ego's lateral offset [m] and heading error [rad]
                    from the centreline the motion planner tracks, and that centreline's sharpest
-                   curvature [1/m] over the next 3 s; a behavior begun with small errors on a
+                   curvature [1/m] over the next 3 s (a lane change begun with small errors on a
                    straight stretch ends after about its minimum duration, otherwise it may run to
-                   the planner's maximum (8 s)
+                   the planner's maximum, 8 s; keep ends after its minimum duration, speed_up and
+                   speed_down once at their speed, after at most 2 s, see
+                   :mod:`hbmp_bench.planning.executor`)
 """
 
 from __future__ import annotations
