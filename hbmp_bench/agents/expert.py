@@ -358,7 +358,9 @@ class ExpertAgent:
             if abs(d) < w:
                 p_in, meet = 0.0, s
                 p_out = (math.copysign(w, v_d) - d) / v_d if abs(v_d) > 0.2 else INF
-            elif d * v_d < 0.0 and abs(v_d) > 0.2 and not held:  # (a red signal holds it at the kerb)
+            elif d * v_d < 0.0 and abs(v_d) > 0.2 and not (held and abs(d) > w + LANE_WIDTH_M / 2):
+                # (one a red signal holds at the kerb is not followed into the path before it is
+                # within half a lane of the ego's corridor: a kerb at a corner may lie that close)
                 p_in, p_out = (abs(d) - w) / abs(v_d), (abs(d) + w) / abs(v_d)
                 meet = s - v_s * d / v_d  # where its walk meets the path
             else:

@@ -211,11 +211,14 @@ def test_pedestrians_ignores_walkers_beside_the_path_and_waiting_at_the_kerb():
 def test_pedestrians_passes_one_a_red_signal_holds_at_the_kerb():
     """Standing at the line on green: a pedestrian 10 m ahead, 4 m to the right, walks diagonally
     towards the crossing it turns over (Town02 NavigationDynamic 19, at a corner): waited for,
-    unless the crossing's red signal holds them at the kerb. In the path, they are waited for."""
+    unless the crossing's red signal holds them at the kerb. Within half a lane of its corridor, or
+    in the path, they are waited for all the same (Town01 NavigationDynamic 21: a corner's kerb lay
+    2 m from the path of a right turn, and a held pedestrian walked on into the car)."""
     crossing = {"ego_dist_m": 5.0, "ego_exit_m": 10.0, "signal": "r", "waiting_m": (4.0,)}
     at_line = dict(stop_distance_m=2.0, junction_exit_m=20.0, speed_mps=0.0, crossings=(crossing,))
     assert act(**at_line, pedestrians=((10.0, -4.0, -1.0, 0.7, False),)) == KEEP
     assert act(**at_line, pedestrians=((10.0, -4.0, -1.0, 0.7, True),)) == SPEED_UP
+    assert act(**at_line, pedestrians=((10.0, -2.5, -1.0, 0.7, True),)) == KEEP
     assert act(**at_line, pedestrians=((6.0, -0.5, 0.0, 1.0, True),)) == KEEP
 
 
