@@ -25,8 +25,9 @@ is taken (a time window):
                          ego is; a standing foe is passed unless it has the right of way and the ego
                          has not entered the junction yet; a foe held by a red light is passed.
 ``_rule_pedestrians``    stop before a pedestrian who is in the ego's path or walks into it while the
-                         ego would pass (before the crossing, where that is on a crossing of its path:
-                         a car standing on a crossing is in the way of everyone on it), and for those
+                         ego would pass, unless a red signal holds them at the kerb of a crossing
+                         (before the crossing, where that is on a crossing of its path: a car
+                         standing on a crossing is in the way of everyone on it), and for those
                          waiting at a crossing of its path whose signal lets them go.
 ``_rule_route_lane``     (a lane change, not a speed) move towards the lane that continues the route as
                          soon as the target lane is free and the change fits before the next stop;
@@ -44,6 +45,7 @@ expert plans with 3.0 and 3.5 m/s².
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -53,6 +55,7 @@ from hbmp_bench.agents.base import PRIVILEGED_OPTION, register_agent
 from hbmp_bench.envs.observation import LANE_WIDTH_M, ObservationConfig
 from hbmp_bench.planning.behaviors import Behavior, BehaviorConfig, reference_speed
 from hbmp_bench.planning.executor import ExecutorConfig
+from hbmp_bench.planning.planner import PlannerConfig
 
 SPEED_UP, SPEED_DOWN, CHANGE_LEFT, CHANGE_RIGHT, KEEP = (int(b) for b in Behavior)
 EGO_LENGTH_M = 4.5
@@ -84,9 +87,9 @@ class Target:
 
     def passes_outside(self, v: float, v_to: float, v_then: float = 0.0) -> bool:
         """Whether a car at ``v`` [m/s] that goes to ``v_to`` and holds it misses the window: it
-        leaves the zone before it (accelerating gently, at 1.5 m/s², to ``v_to`` or to ``v_then``
-        where the next decisions come soon enough to speed up further) or gets there after it
-        (at ``v_to`` at once)."""
+        leaves the zone before it (accelerating gently, at 1.5 m/s², to ``v_to`` or to ``v_then``,
+        the speed the next decisions' speed_up reach: :attr:`Timing.chain_mps`) or gets there after
+        it (at ``v_to`` at once)."""
         if self.from_s <= 0.0 and self.until_s == INF:
             return False
         leave_s = ExpertAgent._time_to(self.at_m + self.zone_m, v, accel=1.5, v_max=max(v_to, v_then))
@@ -99,13 +102,15 @@ class Timing:
     """How long the expert assumes a behavior may run before it decides again [s], and how a chain
     of ``speed_down`` stops.
 
-    Continuous fidelity: a behavior ends once the planner has converged to its lane (and, for
-    speed_up / speed_down, to its speed), after at least 1 s; speed_up, speed_down and keep after
-    at most ``ExecutorConfig.lane_keeping_max_duration`` (2 s), a lane change after at most
-    ``max_duration`` (8 s). ``hard_s`` / ``lane_change_hard_s`` are those longest runs, checked
-    against the lines the planner does not see (stop lines, conflict areas); the typical runs
-    (``keep_s``, ``speed_up_s``, ``lane_change_s``) against the actors the planner itself brakes
-    for. Event fidelity: every behavior lasts one decision period.
+    Continuous fidelity: a behavior ends once the planner has converged (a lane change to its
+    lane, speed_up / speed_down to their speed, keep at once), after at least
+    ``ExecutorConfig.min_duration`` (1 s); speed_up and speed_down after at most
+    ``lane_keeping_max_duration`` (2 s), a lane change after at most ``max_duration`` (8 s).
+    ``hard_s`` / ``keep_hard_s`` / ``lane_change_hard_s`` are those longest runs (keep: exactly
+    1 s), checked against the lines the planner does not see (stop lines, conflict areas); the
+    typical runs (``keep_s``, ``speed_up_s``, ``lane_change_s``) against the actors the planner
+    itself brakes for (``keep_s`` longer than keep runs: room for a leader that brakes). Event
+    fidelity: every behavior lasts one decision period.
     """
 
     keep_s: float
@@ -115,6 +120,10 @@ class Timing:
     lane_change_hard_s: float
     stop_decel: float
     accel: float
+    keep_hard_s: float
+    chain_mps: float = 0.0
+    """The speed a chain of speed_up decisions reaches while the ego leaves a zone ahead [m/s]
+    (:meth:`Target.passes_outside`; 0: no further speed_up is counted on)."""
     crawl_s: float = 0.1
     """How long a lane change begun below 2 m/s may run (slow to converge sideways) [s]."""
 
@@ -125,10 +134,10 @@ class Timing:
         if continuous:
             return Timing(keep_s=1.5, speed_up_s=executor.lane_keeping_max_duration, lane_change_s=3.0,
                           hard_s=executor.lane_keeping_max_duration, lane_change_hard_s=executor.max_duration,
-                          stop_decel=3.0, accel=INF, crawl_s=executor.max_duration)
+                          stop_decel=3.0, accel=INF, keep_hard_s=executor.min_duration, crawl_s=executor.max_duration)
         p = max(period_s, 0.1)
         return Timing(keep_s=p, speed_up_s=p, lane_change_s=p, hard_s=p, lane_change_hard_s=p, stop_decel=3.5,
-                      accel=2.6, crawl_s=p)
+                      accel=2.6, keep_hard_s=p, crawl_s=p)
 
 
 @register_agent("expert")
@@ -146,6 +155,7 @@ class ExpertAgent:
         grid: the M_t grid it reads (must match the environment's).
         behavior: the v_ref rule of speed_up / speed_down (must match the environment's).
         executor: the motion planner's behavior timing (must match the environment's).
+        planner: the motion planner's curve speed limits (must match the environment's).
 
     Attributes:
         env_kwargs: the env options it asks for: ``privileged=True`` (the privileged scene fields;
@@ -157,7 +167,8 @@ class ExpertAgent:
     def __init__(self, cruise_fraction: float = 0.9, turn_speed_mps: float = 6.0, stop_margin_m: float = 2.0,
                  standstill_gap_m: float = 3.0, time_gap_s: float = 1.2, leader_decel: float = 4.5,
                  foe_margin_s: float = 1.5, grid: ObservationConfig | None = None,
-                 behavior: BehaviorConfig | None = None, executor: ExecutorConfig | None = None):
+                 behavior: BehaviorConfig | None = None, executor: ExecutorConfig | None = None,
+                 planner: PlannerConfig | None = None):
         self.cruise_fraction = cruise_fraction
         self.turn_speed_mps = turn_speed_mps
         self.stop_margin_m = stop_margin_m
@@ -168,6 +179,7 @@ class ExpertAgent:
         self.grid = grid or ObservationConfig()
         self.behavior = behavior or BehaviorConfig()
         self.executor = executor or ExecutorConfig()
+        self.planner = planner or PlannerConfig()
         self.env_kwargs = {PRIVILEGED_OPTION: True}
         self._stuck_s = 0.0
 
@@ -179,7 +191,24 @@ class ExpertAgent:
         period = float(info.get("duration_s", 0.1))
         fidelity = scene.get("fidelity")
         continuous = fidelity == "continuous" if fidelity else period > 0.2
-        return Timing.for_period(period, continuous, self.executor)
+        t = Timing.for_period(period, continuous, self.executor)
+        return dataclasses.replace(t, chain_mps=self._chain_speed(scene, continuous))
+
+    def _chain_speed(self, scene: dict, continuous: bool) -> float:
+        """The speed [m/s] a chain of speed_up decisions reaches while the ego leaves a zone ahead
+        (a crossing, a conflict area), at most 8 m/s: with SUMO's 0.1 s decisions 8; with the motion
+        planner (a decision about every second) also at most the cruise speed and the planner's
+        curve speed cap on the sharpest curvature of the path ahead (``curvature_ahead``), 0 where
+        that is unknown."""
+        if not continuous:
+            return 8.0
+        kappa = scene.get("curvature_ahead")
+        if kappa is None:
+            return 0.0
+        cap = min(8.0, self.cruise_fraction * scene["speed_limit_mps"])
+        if kappa > 1e-6:
+            cap = min(cap, math.sqrt(self.planner.curve_lat_accel / kappa), self.planner.yaw_rate_max / kappa)
+        return cap
 
     @staticmethod
     def _time_to(distance_m: float, v: float, accel: float = 2.0, v_max: float = INF) -> float:
@@ -199,15 +228,14 @@ class ExpertAgent:
     def _meets(targets: list[Target], v: float, v_to: float, hold_s: float, t: Timing, tolerance: float,
                hard_s: float | None = None) -> bool:
         """Whether a behavior that takes the speed from ``v`` to ``v_to`` and holds it for
-        ``hold_s`` [s] (at least ``hard_s``, default ``t.hard_s``, for hard targets) still lets a
-        chain of speed_down meet every target; a speed cap may be exceeded by ``tolerance`` [m/s],
-        a stop never."""
+        ``hold_s`` [s] (its longest run ``hard_s``, default ``t.hard_s``, for hard targets) still
+        lets a chain of speed_down meet every target; a speed cap may be exceeded by ``tolerance``
+        [m/s], a stop never."""
         hard_s = t.hard_s if hard_s is None else hard_s
-        v_then = 0.0 if t.hard_s > 1.0 else 8.0  # decisions every 0.1 s keep speeding up
         for g in targets:
-            if v_to <= g.speed_mps + (tolerance if g.speed_mps > 0.0 else 0.0) or g.passes_outside(v, v_to, v_then):
+            if v_to <= g.speed_mps + (tolerance if g.speed_mps > 0.0 else 0.0) or g.passes_outside(v, v_to, t.chain_mps):
                 continue
-            travel = max(v, v_to) * (max(hold_s, hard_s) if g.hard else hold_s)
+            travel = max(v, v_to) * (hard_s if g.hard else hold_s)
             if g.at_m <= 0.0 or travel + (v_to ** 2 - g.speed_mps ** 2) / (2.0 * t.stop_decel) > g.at_m:
                 return False
         return True
@@ -321,7 +349,7 @@ class ExpertAgent:
     def _rule_pedestrians(self, scene: dict, t: Timing) -> list[Target]:
         out = []
         ahead = [c for c in scene.get("crossings", ()) if c["ego_dist_m"] >= 0.5]
-        for s, d, v_s, v_d in scene.get("pedestrians", ()):
+        for s, d, v_s, v_d, held in scene.get("pedestrians", ()):
             if s < 0.5:
                 continue  # beside or behind the front bumper: driving on takes the ego away
             # the ego's half width and a margin: wider for a walking pedestrian than for one who
@@ -330,7 +358,9 @@ class ExpertAgent:
             if abs(d) < w:
                 p_in, meet = 0.0, s
                 p_out = (math.copysign(w, v_d) - d) / v_d if abs(v_d) > 0.2 else INF
-            elif d * v_d < 0.0 and abs(v_d) > 0.2:
+            elif d * v_d < 0.0 and abs(v_d) > 0.2 and not (held and abs(d) > w + LANE_WIDTH_M / 2):
+                # (one a red signal holds at the kerb is not followed into the path before it is
+                # within half a lane of the ego's corridor: a kerb at a corner may lie that close)
                 p_in, p_out = (abs(d) - w) / abs(v_d), (abs(d) + w) / abs(v_d)
                 meet = s - v_s * d / v_d  # where its walk meets the path
             else:
@@ -435,6 +465,6 @@ class ExpertAgent:
         if v_up > v + 0.05 and self._meets(targets, v, v_up, t.speed_up_s, t, tolerance=1.0):
             return SPEED_UP
         creeping = 0.05 < v < 1.0 and t.crawl_s > 1.0  # the planner converges slowly at a crawl: stop instead
-        if not creeping and self._meets(targets, v, v, t.keep_s, t, tolerance=0.3):
+        if not creeping and self._meets(targets, v, v, t.keep_s, t, tolerance=0.3, hard_s=t.keep_hard_s):
             return KEEP
         return SPEED_DOWN

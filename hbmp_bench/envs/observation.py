@@ -57,6 +57,11 @@ Road = IntEnum("Road", [(name.upper(), k) for k, name in enumerate(ROAD_PROFILES
 LANE_WIDTH_M = 3.5
 """Lane width of the towns' networks [m] (``netconvert --default.lanewidth``), the scale of
 lateral errors and of a lane offset in M_t's cells."""
+CORNER_MIN_SPACING_M = 1.0
+"""Least spacing of the vertices the centreline is rounded from [m]: a lane and the junction lane
+it leads onto meet with a repeated vertex or one 0.2 m from a kink, which rounding alone turns into
+a curvature of 2 1/m, and the planner's curve speed cap into a crawl across the stop line; merged,
+a Town01/02 corner peaks at 0.26 1/m."""
 GREEN, YELLOW, RED = "gGoOs", "yY", "rRu"
 
 
@@ -147,8 +152,9 @@ def followed_path(net: RoadNetwork, lane_id: str, next_edges: tuple[str, ...], b
     junctions (the paper's "virtual lanes"); straight on past a dead end. ``via``: the junction lane
     to leave ``lane_id`` by where several links lead onto the next edge (default: the first). ``max_spacing`` [m]
     densifies the polyline and ``round_corners`` passes of corner cutting round SUMO's coarse
-    vertices (:func:`hbmp_bench.planning.round_corners`), which the motion planner needs;
-    the defaults keep SUMO's vertices (enough for M_t)."""
+    vertices (:func:`hbmp_bench.planning.round_corners`, after merging the vertices closer than
+    ``CORNER_MIN_SPACING_M``), which the motion planner needs; the defaults keep SUMO's vertices
+    (enough for M_t)."""
     shape = net.lane(lane_id).shape
     back = shape[0] - shape[1]
     back = back / max(np.hypot(*back), 1e-9)
@@ -168,7 +174,7 @@ def followed_path(net: RoadNetwork, lane_id: str, next_edges: tuple[str, ...], b
         beyond += net.lane(nxt).length
         lane = nxt
     xy = np.vstack([np.atleast_2d(p) for p in pieces])
-    return Path(smooth_polyline(xy, round_corners) if round_corners else xy, max_spacing=max_spacing)
+    return Path(smooth_polyline(xy, round_corners, CORNER_MIN_SPACING_M) if round_corners else xy, max_spacing=max_spacing)
 
 
 class ObservationBuilder:

@@ -23,14 +23,18 @@ of the actors near the path), and
                    it is in) passes over: one dict per crossing with ``ego_dist_m`` / ``ego_exit_m``
                    (ego front to the start / end of the stretch of its path over the crossing [m]),
                    ``signal`` (the pedestrians' signal char, "" without a light) and ``waiting_m``
-                   (distance [m] from each pedestrian waiting to step onto it to that stretch)
+                   (distance [m] from each pedestrian waiting to step onto it to that stretch); a
+                   pedestrian waiting at one whose signal is red or yellow is held there (SUMO's
+                   pedestrians step onto a crossing on green only): its ``pedestrians`` entry says so
   fidelity         the world's fidelity (``event`` or ``continuous``)
   lane_error_m, heading_error_rad, curvature_ahead
                    continuous fidelity only: the ego's lateral offset [m] and heading error [rad]
                    from the centreline the motion planner tracks, and that centreline's sharpest
-                   curvature [1/m] over the next 3 s; a behavior begun with small errors on a
+                   curvature [1/m] over the next 3 s (a lane change begun with small errors on a
                    straight stretch ends after about its minimum duration, otherwise it may run to
-                   the planner's maximum (8 s)
+                   the planner's maximum, 8 s; keep ends after its minimum duration, speed_up and
+                   speed_down once at their speed, after at most 2 s, see
+                   :mod:`hbmp_bench.planning.executor`)
 """
 
 from __future__ import annotations
@@ -39,7 +43,7 @@ import functools
 
 import numpy as np
 
-from hbmp_bench.envs.observation import followed_path
+from hbmp_bench.envs.observation import RED, YELLOW, followed_path
 from hbmp_bench.maps.roadnet import Connection, RoadNetwork, point_along, project_on_polyline
 from hbmp_bench.metrics.geometry import stop_line_of
 from hbmp_bench.planning.frame import Path
@@ -62,7 +66,7 @@ FOE_RANGE_M = 80.0
 
 def path_actors(path: Path, ego_xy: np.ndarray, ego_length: float, ego_width: float, xy: np.ndarray,
                 yaw: np.ndarray, speed: np.ndarray, length: np.ndarray, width: np.ndarray,
-                is_pedestrian: np.ndarray) -> dict:
+                is_pedestrian: np.ndarray, held: np.ndarray | None = None) -> dict:
     """The actors near the followed lane's centreline ``path``, measured along it.
 
     Args:
@@ -70,15 +74,17 @@ def path_actors(path: Path, ego_xy: np.ndarray, ego_length: float, ego_width: fl
         ego_xy: (2,) ego footprint centre [m]; ego_length / ego_width: its footprint [m].
         xy, yaw, speed, length, width, is_pedestrian: (K,) the other actors (centres [m],
             headings [rad], speeds [m/s], footprints [m]).
+        held: (K,) bool, the pedestrians a red signal holds at the kerb of a crossing (default none).
 
     Returns:
         ``leader_gap_m``: free distance from the ego's front bumper to the nearest actor ahead
         whose footprint lies in the ego's corridor (vehicle or pedestrian), inf if none within
         ``LEADER_RANGE_M``; ``leader_speed_mps``: that actor's speed along the path [m/s] (0 if
-        none; negative when it comes towards the ego); ``pedestrians``: ((s, d, v_s, v_d), ...) for
-        every pedestrian ahead within ``PEDESTRIAN_RANGE_M`` and ``PEDESTRIAN_LATERAL_M``: its
-        distance along the path from the ego's front bumper [m], signed lateral offset (left
-        positive) [m] and velocity along / across the path (left positive) [m/s], nearest first.
+        none; negative when it comes towards the ego); ``pedestrians``: ((s, d, v_s, v_d, held),
+        ...) for every pedestrian ahead within ``PEDESTRIAN_RANGE_M`` and ``PEDESTRIAN_LATERAL_M``:
+        its distance along the path from the ego's front bumper [m], signed lateral offset (left
+        positive) [m], velocity along / across the path (left positive) [m/s] and ``held``,
+        nearest first.
     """
     out = {"leader_gap_m": float("inf"), "leader_speed_mps": 0.0, "pedestrians": ()}
     if len(xy) == 0:
@@ -102,8 +108,10 @@ def path_actors(path: Path, ego_xy: np.ndarray, ego_length: float, ego_width: fl
         out["leader_speed_mps"] = float(v_s[k])
     ped = is_pedestrian[idx] & (s - front > -ego_length) & (s - front < PEDESTRIAN_RANGE_M) & (np.abs(d) < PEDESTRIAN_LATERAL_M)
     order = np.argsort(s[ped])
-    out["pedestrians"] = tuple((float(a), float(b), float(e), float(f)) for a, b, e, f in
-                               zip((s[ped] - front)[order], d[ped][order], v_s[ped][order], v_d[ped][order]))
+    held = np.zeros(len(xy), dtype=bool) if held is None else np.asarray(held, dtype=bool)
+    out["pedestrians"] = tuple((float(a), float(b), float(e), float(f), bool(h)) for a, b, e, f, h in
+                               zip((s[ped] - front)[order], d[ped][order], v_s[ped][order], v_d[ped][order],
+                                   held[idx][ped][order]))
     return out
 
 
@@ -175,15 +183,17 @@ class PrivilegedScene:
         ``junction_exit_m``."""
         lane = followed_lane or ego.lane
         link, entry = self._link_ahead(ego, followed_lane, next_edges)
+        crossings = () if link is None else self._crossings(link, entry, actors)
+        held = {p for c, waiting in crossings if c["signal"] and c["signal"] in RED + YELLOW for p in waiting}
         out = path_actors(self._path(lane, tuple(next_edges[:3]), link.via if link is not None else ""), ego.xy,
                           self.vtype.length, self.vtype.width, actors.xy, actors.yaw, actors.speed, actors.length,
-                          actors.width, actors.is_pedestrian)
+                          actors.width, actors.is_pedestrian, np.array([i in held for i in actors.ids], dtype=bool))
         out["lights_ahead"] = tuple((float(light.distance), light.state,
                                      self.sim.signal_schedule(light.tls, light.link_index))
                                     for light in lights if light.distance <= LIGHTS_RANGE_M)
         out["junction_exit_m"] = junction_exit_m
         out["junction_foes"] = () if link is None else self._junction_foes(link, entry)
-        out["crossings"] = () if link is None else self._crossings(link, entry, actors)
+        out["crossings"] = tuple(c for c, _ in crossings)
         out["fidelity"] = self.fidelity
         if self.lane_path is not None:
             out.update(self._lane_tracking(ego, lane, next_edges))
@@ -224,15 +234,16 @@ class PrivilegedScene:
         signal = self.sim.light_state(link.tls, link.link_index) if link.tls else ""
         return junction_foes(entry, signal, link.state, conflicts, users, signals)
 
-    def _crossings(self, link: Connection, entry: float, actors: Actors) -> tuple[dict, ...]:
+    def _crossings(self, link: Connection, entry: float, actors: Actors) -> tuple[tuple[dict, tuple[str, ...]], ...]:
+        """(the scene's entry, the ids of the pedestrians waiting to step onto it) per crossing."""
         shape, out = self.net.link_shape(link), []
         for crossing, at, clear in self.net.link_crossings(link):
             point = point_along(shape, 0.5 * (at + clear))
-            waiting = [float(np.hypot(*(actors.xy[actors.ids.index(p)] - point)))
-                       for p in self.sim.crossing_waiters(crossing.id, crossing.walkingareas) if p in actors.ids]
-            out.append({"ego_dist_m": entry + at, "ego_exit_m": entry + clear,
-                        "signal": self.sim.light_state(crossing.tls, crossing.link_index) if crossing.tls else "",
-                        "waiting_m": tuple(sorted(waiting))})
+            ids = tuple(p for p in self.sim.crossing_waiters(crossing.id, crossing.walkingareas) if p in actors.ids)
+            waiting = [float(np.hypot(*(actors.xy[actors.ids.index(p)] - point))) for p in ids]
+            out.append(({"ego_dist_m": entry + at, "ego_exit_m": entry + clear,
+                         "signal": self.sim.light_state(crossing.tls, crossing.link_index) if crossing.tls else "",
+                         "waiting_m": tuple(sorted(waiting))}, ids))
         return tuple(out)
 
     def _lane_tracking(self, ego: VehicleState, lane: str, next_edges: tuple[str, ...]) -> dict:

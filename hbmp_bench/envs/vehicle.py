@@ -473,21 +473,27 @@ class GoalRoute:
     def _route_lights(self, first_only: bool = False) -> list[LightAhead]:
         """The traffic lights ahead along the route, nearest first, up to ``LIGHTS_RANGE_M``
         (distance from the front bumper to the stop line [m]); with ``first_only`` the nearest
-        alone (R_t's). At the end of the followed lane, its link's (the one the detectors judge);
-        beyond, those of the links the route takes. SUMO's own next lights (``getNextTLS``) follow
-        SUMO's map matching of a pushed pose, which may jump to another visit of a junction."""
+        alone (R_t's). At the end of the followed lane, its link's (the one the detectors judge),
+        also off the route (past a goal it missed, on the route's continuation); beyond, those of
+        the links the route takes, and beyond the route's last edge SUMO's next light (not R_t's:
+        SUMO's own next lights, ``getNextTLS``, follow SUMO's map matching of a pushed pose, which
+        may jump to another visit of a junction; past the route's end there is no other)."""
         v = self.v
         net, sim, lane = v.shared.net, v.shared.sim, v.followed_lane
-        k, at = self._route_position()
-        if k is None or lane not in net.lanes:
+        if lane not in net.lanes:
             return []
+        k, at = self._route_position()
         out = []
-        nxt = self.edges[k + 1] if k + 1 < len(self.edges) else None
+        nxt = next(iter(v.next_edges(1)), None)  # the detectors' link (self.edges[k + 1] on the route)
         fixed = v.shared.locator.stop_line(lane, nxt)
         ahead = self._to_stop_line(lane)
         if fixed is not None and ahead > 0.0:
             out.append(LightAhead(fixed[2], fixed[3], ahead, sim.light_state(fixed[2], fixed[3])))
-        if nxt is None or (first_only and out):
+        if nxt is None and not first_only:  # the route's last edge: past a goal it missed, SUMO drives
+            light = sim.light_ahead(v.id)  # on along the route's continuation, towards its next light
+            if light is not None and all((a.tls, a.link_index) != (light.tls, light.link_index) for a in out):
+                out = sorted([*out, light], key=lambda a: a.distance)
+        if k is None or nxt is None or (first_only and out):
             return out
         own = next((c for c in net.connections[net.lane(lane).edge] if c.from_lane == lane and c.to_edge == nxt), None)
         to_lane = (own or net.route_link(self.edges[k], nxt, lane)).to_lane

@@ -418,7 +418,7 @@ def _report(along, cross, c, d2, lo, hi):
     return c_rep, e
 
 
-def round_corners(xy: np.ndarray, iterations: int = 3) -> np.ndarray:
+def round_corners(xy: np.ndarray, iterations: int = 3, min_spacing: float = 0.0) -> np.ndarray:
     """Chaikin corner cutting of a polyline (N, 2) -> (M, 2), end points kept.
 
     Each pass replaces every segment by its 1/4 and 3/4 points, so the curve converges to a
@@ -426,10 +426,20 @@ def round_corners(xy: np.ndarray, iterations: int = 3) -> np.ndarray:
     adjacent segment times the kink's sine. Lane shapes from SUMO bend in few coarse vertices
     (junction lanes: ~4 m chords with ~25 degree kinks); rounding them gives the planner a
     reference with continuous curvature.
+
+    The bend of a kink is spread over its adjacent segments, so a short one bends it within a
+    fraction of its length: where a lane meets a junction lane SUMO's shapes repeat a vertex or
+    leave one 0.2 m from the kink, and a 23 degree kink there rounds to a curvature of 2 1/m
+    (a 0.5 m radius). ``min_spacing`` [m] first drops the vertices closer than that to the
+    previously kept one (the last vertex kept), so every kink bends over at least that length.
     """
     pts = np.asarray(xy, dtype=float)
     if iterations < 0:
         raise ValueError(f"iterations must be >= 0, got {iterations!r}")
+    if not min_spacing >= 0.0:
+        raise ValueError(f"min_spacing must be >= 0 [m], got {min_spacing!r}")
+    if min_spacing > 0.0:
+        pts = _dedup(pts, min_spacing)
     for _ in range(iterations):  # loop over refinement passes (construction only)
         if len(pts) < 3:
             break

@@ -10,6 +10,7 @@ import pytest
 from hbmp_bench.agents import agent_env_kwargs
 from hbmp_bench.agents.expert import CHANGE_LEFT, CHANGE_RIGHT, KEEP, SPEED_DOWN, SPEED_UP, ExpertAgent, Timing
 from hbmp_bench.envs.observation import LANE_WIDTH_M, ObservationConfig
+from hbmp_bench.planning.executor import ExecutorConfig
 
 GRID = ObservationConfig()
 INF = float("inf")
@@ -69,8 +70,8 @@ def test_speed_limit_reaches_a_turn_at_turn_speed():
 
 # -------------------------------------------------------------------- red light
 def test_red_light_stops_before_the_line():
-    # keeping 8 m/s for a behavior (2 s, 16 m) leaves 7 m to stop in: too little
-    assert act(**light("r", 25.0), speed_mps=8.0) == SPEED_DOWN
+    # keeping 8 m/s for a keep (1 s, 8 m) leaves 10 m to stop in: too little (8²/6 = 10.7 m)
+    assert act(**light("r", 20.0), speed_mps=8.0) == SPEED_DOWN
     assert act(**light("r", 40.0), speed_mps=8.0) in (KEEP, SPEED_UP)
     # standing before a red that stays red: waits, and does not creep into the junction
     assert act(**light("r", 3.0, ((0.0, "r"), (20.0, "G"))), speed_mps=0.0) == KEEP
@@ -85,7 +86,7 @@ def test_red_light_drives_off_when_it_turns_green_before_the_ego_gets_there():
 
 def test_red_light_stops_for_a_yellow_it_can_stop_for_and_goes_through_one_it_cannot():
     yellow = ((0.0, "y"), (3.0, "r"), (20.0, "G"))
-    assert act(**light("y", 25.0, yellow), speed_mps=8.0) == SPEED_DOWN  # 16 m for 2 s, 8²/6 = 11 m of braking
+    assert act(**light("y", 20.0, yellow), speed_mps=8.0) == SPEED_DOWN  # 8 m for a keep, 8²/6 = 11 m of braking
     assert act(**light("y", 8.0, yellow), speed_mps=12.0) != SPEED_DOWN  # 24 m of braking: go through
     assert "red_light" not in rules(**light("y", 8.0, yellow), speed_mps=12.0)
 
@@ -97,31 +98,31 @@ def test_red_light_waits_at_the_line_through_a_yellow_when_standing():
 
 def test_red_light_slows_for_a_green_that_turns_red_before_the_ego_gets_there():
     turning = ((0.0, "G"), (2.0, "y"), (5.0, "r"), (25.0, "G"))
-    assert act(**light("G", 40.0, turning), speed_mps=12.0) == SPEED_DOWN  # there in ~3.3 s: yellow or red
+    assert act(**light("G", 35.0, turning), speed_mps=12.0) == SPEED_DOWN  # there in ~2.9 s: yellow or red
     assert act(**light("G", 15.0, turning), speed_mps=12.0) in (KEEP, SPEED_UP)  # there in 1.3 s: green
 
 
 def test_red_light_also_stops_for_a_light_beyond_the_next_one():
-    # in a junction at 8 m/s: the next light, 20 m ahead, stays green; the one after it, 50 m ahead,
-    # is red for a while: a behavior that may run 2 s must not take the ego past it
+    # in a junction at 8 m/s: the next light, 12 m ahead, stays green; the one after it, 19 m ahead,
+    # is red for a while: a keep (1 s) must not take the ego where it can no longer stop before it
     green = ((0.0, "G"), (40.0, "y"))
     red = ((0.0, "r"), (30.0, "G"))
-    scene = dict(in_junction=True, stop_distance_m=20.0, junction_exit_m=5.0, speed_mps=8.0)
-    assert act(**scene, lights_ahead=((20.0, "G", green),)) in (KEEP, SPEED_UP)
-    assert act(**scene, lights_ahead=((20.0, "G", green), (25.0, "r", red))) == SPEED_DOWN
+    scene = dict(in_junction=True, stop_distance_m=12.0, junction_exit_m=5.0, speed_mps=8.0)
+    assert act(**scene, lights_ahead=((12.0, "G", green),)) in (KEEP, SPEED_UP)
+    assert act(**scene, lights_ahead=((12.0, "G", green), (19.0, "r", red))) == SPEED_DOWN
 
 
 def test_red_light_without_privileged_lights_reads_the_lane_light():
-    obs, info = situation(light="r", stop_distance_m=25.0, speed_mps=8.0)
+    obs, info = situation(light="r", stop_distance_m=20.0, speed_mps=8.0)
     del info["scene"]["lights_ahead"]
     assert ExpertAgent().act(obs, info) == SPEED_DOWN
 
 
 def test_red_light_plans_stops_with_the_behaviors_the_fidelity_runs():
-    # 25 m before a red at 8 m/s: a behavior of the motion planner may run 8 s, so it brakes now;
-    # with SUMO's 0.1 s decisions it need not brake yet (8²/7 = 9 m), only when the line comes close
-    assert act(**light("r", 25.0), speed_mps=8.0) == SPEED_DOWN
-    assert act(**light("r", 25.0), speed_mps=8.0, fidelity="event", duration_s=0.1) != SPEED_DOWN
+    # 20 m before a red at 8 m/s: a keep of the motion planner runs 1 s, so it brakes now; with
+    # SUMO's 0.1 s decisions it need not brake yet (8²/7 = 9 m), only when the line comes close
+    assert act(**light("r", 20.0), speed_mps=8.0) == SPEED_DOWN
+    assert act(**light("r", 20.0), speed_mps=8.0, fidelity="event", duration_s=0.1) != SPEED_DOWN
     assert act(**light("r", 10.0), speed_mps=8.0, fidelity="event", duration_s=0.1) == SPEED_DOWN
     # standing 2 m before the line of a green light with yellow in 6 s: drive off (speeding up
     # 0.26 m/s per decision, it is well past the line by then)
@@ -184,27 +185,41 @@ def test_yield_passes_a_foe_that_gives_way_or_is_held_by_its_light():
 
 
 def test_yield_slows_before_the_junction_for_a_foe_arriving_with_the_ego():
-    approach = dict(stop_distance_m=30.0, junction_exit_m=45.0, speed_mps=10.0)
-    assert act(**approach, junction_foes=(foe(36.0, 40.0, 10.0),)) == SPEED_DOWN
-    assert act(**approach, junction_foes=(foe(36.0, 300.0, 10.0),)) in (KEEP, SPEED_UP)
+    approach = dict(stop_distance_m=25.0, junction_exit_m=40.0, speed_mps=10.0)
+    assert act(**approach, junction_foes=(foe(31.0, 35.0, 10.0),)) == SPEED_DOWN
+    assert act(**approach, junction_foes=(foe(31.0, 300.0, 10.0),)) in (KEEP, SPEED_UP)
     # a conflict at the junction after the next one is judged once the ego has crossed this one
     assert act(**approach, junction_foes=(foe(60.0, 60.0, 10.0),)) in (KEEP, SPEED_UP)
 
 
 # ------------------------------------------------------------------ pedestrians
 def test_pedestrians_stops_for_one_walking_into_the_path():
-    crossing = (15.0, -4.0, 0.0, 1.3)  # 15 m ahead, 4 m to the right, walking left across
+    crossing = (15.0, -4.0, 0.0, 1.3, False)  # 15 m ahead, 4 m to the right, walking left across
     assert act(pedestrians=(crossing,), speed_mps=8.0) == SPEED_DOWN
-    assert act(pedestrians=((15.0, 0.3, 0.0, 0.0),), speed_mps=8.0) == SPEED_DOWN  # standing in the path
+    assert act(pedestrians=((15.0, 0.3, 0.0, 0.0, False),), speed_mps=8.0) == SPEED_DOWN  # standing in the path
 
 
 def test_pedestrians_ignores_walkers_beside_the_path_and_waiting_at_the_kerb():
-    along = (15.0, -4.0, 1.3, 0.0)  # on the sidewalk, walking along the road
-    kerb = (4.0, -1.75, 0.0, 0.0)  # standing at the kerb, at the lane's edge
-    leaving = (15.0, 2.5, 0.0, 1.3)  # left of the path, walking away from it
+    along = (15.0, -4.0, 1.3, 0.0, False)  # on the sidewalk, walking along the road
+    kerb = (4.0, -1.75, 0.0, 0.0, False)  # standing at the kerb, at the lane's edge
+    leaving = (15.0, 2.5, 0.0, 1.3, False)  # left of the path, walking away from it
     for p in (along, kerb, leaving):
         assert "pedestrian" not in rules(pedestrians=(p,), speed_mps=8.0)
     assert act(pedestrians=(along, kerb, leaving), speed_mps=8.0) == SPEED_UP
+
+
+def test_pedestrians_passes_one_a_red_signal_holds_at_the_kerb():
+    """Standing at the line on green: a pedestrian 10 m ahead, 4 m to the right, walks diagonally
+    towards the crossing it turns over (Town02 NavigationDynamic 19, at a corner): waited for,
+    unless the crossing's red signal holds them at the kerb. Within half a lane of its corridor, or
+    in the path, they are waited for all the same (Town01 NavigationDynamic 21: a corner's kerb lay
+    2 m from the path of a right turn, and a held pedestrian walked on into the car)."""
+    crossing = {"ego_dist_m": 5.0, "ego_exit_m": 10.0, "signal": "r", "waiting_m": (4.0,)}
+    at_line = dict(stop_distance_m=2.0, junction_exit_m=20.0, speed_mps=0.0, crossings=(crossing,))
+    assert act(**at_line, pedestrians=((10.0, -4.0, -1.0, 0.7, False),)) == KEEP
+    assert act(**at_line, pedestrians=((10.0, -4.0, -1.0, 0.7, True),)) == SPEED_UP
+    assert act(**at_line, pedestrians=((10.0, -2.5, -1.0, 0.7, True),)) == KEEP
+    assert act(**at_line, pedestrians=((6.0, -0.5, 0.0, 1.0, True),)) == KEEP
 
 
 def test_pedestrians_waits_for_one_about_to_step_onto_a_crossing_of_its_path():
@@ -218,11 +233,26 @@ def test_pedestrians_waits_for_one_about_to_step_onto_a_crossing_of_its_path():
         assert act(**at_line, crossings=(other,)) == SPEED_UP
 
 
+def test_pedestrians_it_turns_over_a_crossing_before_a_waiting_pedestrian_can_step_onto_it():
+    """Standing at the line, a pedestrian waits 11 m from the crossing's stretch of its path (on it
+    in 4.7 s at a brisk 1.5 m/s, less a second). Driving off (1.5 m/s² to the speed a chain of
+    speed_up reaches) clears the stretch in 4.2 s on a gentle curve, where the planner's curve cap
+    (2 m/s², 0.6 rad/s at 0.05 1/m: 6.3 m/s) allows it; not in a tight one (0.5 1/m: 1.2 m/s), nor
+    where the path's curvature is unknown (no further speed_up counted on: 7.4 s at 2 m/s)."""
+    crossing = {"ego_dist_m": 5.0, "ego_exit_m": 9.0, "signal": "G", "waiting_m": (11.0,)}
+    at_line = dict(stop_distance_m=2.0, junction_exit_m=20.0, speed_mps=0.0, crossings=(crossing,))
+    assert act(**at_line, curvature_ahead=0.05) == SPEED_UP
+    assert act(**at_line, curvature_ahead=0.5) == KEEP
+    assert act(**at_line) == KEEP
+    # SUMO's 0.1 s decisions keep speeding up (to 8 m/s)
+    assert act(**at_line, fidelity="event", duration_s=0.1) == SPEED_UP
+
+
 def test_pedestrians_on_a_crossing_are_waited_for_before_the_crossing_not_on_it():
     # a turn over a crossing whose stretch of the path runs 5..11 m ahead; a pedestrian walks it
     # obliquely to the path: 8 m ahead, 5 m to the left, coming across (Town04 NavigationDynamic 6)
     crossing = {"ego_dist_m": 5.0, "ego_exit_m": 11.0, "signal": "G", "waiting_m": ()}
-    walker = (8.0, 5.0, -0.3, -1.2)
+    walker = (8.0, 5.0, -0.3, -1.2, False)
     stops = [g for g in ExpertAgent().targets(*situation(pedestrians=(walker,), crossings=(crossing,), speed_mps=4.0))
              if g.rule == "pedestrian"]
     assert [g.at_m for g in stops] == [pytest.approx(5.0 - ExpertAgent().stop_margin_m)]
@@ -246,7 +276,7 @@ def test_route_lane_changes_before_the_goal_on_the_goal_edge():
 
 
 def test_pedestrians_beside_the_ego_do_not_stop_it():
-    beside = (-1.5, -1.2, 0.0, 1.3)  # next to the car, behind its front bumper
+    beside = (-1.5, -1.2, 0.0, 1.3, False)  # next to the car, behind its front bumper
     assert "pedestrian" not in rules(pedestrians=(beside,), speed_mps=3.0)
 
 
@@ -258,16 +288,29 @@ def test_the_expert_stops_rather_than_creeps():
 
 
 def test_it_plans_with_the_longest_run_of_each_behavior():
-    """With the motion planner, speed_up / speed_down / keep run at most 2 s and a lane change 8 s:
-    40 m before a red at 6 m/s it may keep its speed (12 m, then a 6 m stop) but not begin a lane
-    change (48 m), unless the target lane's light is green long enough."""
+    """With the motion planner, speed_up / speed_down run at most 2 s, keep exactly 1 s and a lane
+    change at most 8 s: 40 m before a red at 6 m/s it may keep its speed (6 m, then a 6 m stop) but
+    not begin a lane change (48 m), unless the target lane's light is green long enough."""
     t = Timing.for_period(1.0, continuous=True)
-    assert (t.hard_s, t.lane_change_hard_s) == (2.0, 8.0)
+    assert (t.hard_s, t.keep_hard_s, t.lane_change_hard_s) == (2.0, 1.0, 8.0)
     red = light("r", 40.0)
     assert act(**red, speed_mps=6.0) in (KEEP, SPEED_UP)
     assert act(**red, speed_mps=6.0, route_lane_offset=1) != CHANGE_LEFT
     green = (40.0, "G", ((0.0, "G"), (30.0, "y"), (34.0, "r")))
     assert act(**red, speed_mps=6.0, route_lane_offset=1, route_lane_light=green) == CHANGE_LEFT
+
+
+def test_it_checks_stop_lines_over_the_run_of_the_behavior_it_chooses():
+    """A keep ends after exactly ``min_duration`` (1 s), a speed_up may run 2 s: 25 m before a red
+    at 8 m/s it may keep its speed (8 m, then a 10.7 m stop, before the line's 23 m) but not speed
+    up to 10 m/s (up to 20 m, then a 16.7 m stop); 20 m before the red it brakes (18.7 > 18 m)."""
+    assert Timing.for_period(1.0, continuous=True).keep_hard_s == ExecutorConfig().min_duration
+    assert act(**light("r", 25.0), speed_mps=8.0) == KEEP
+    assert act(**light("r", 20.0), speed_mps=8.0) == SPEED_DOWN
+    # the same for a yield line (1 m before the junction) with a foe arriving with the ego
+    approach = dict(stop_distance_m=25.0, junction_exit_m=50.0, speed_mps=8.0)
+    assert act(**approach, junction_foes=(foe(35.0, 35.0, 10.0),)) == KEEP
+    assert act(**{**approach, "stop_distance_m": 19.0}, junction_foes=(foe(29.0, 29.0, 10.0),)) == SPEED_DOWN
 
 
 def test_standing_before_a_red_line_it_moves_up_to_the_line():

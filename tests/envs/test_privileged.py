@@ -52,9 +52,13 @@ def test_path_actors_reports_pedestrians_near_the_path_with_their_velocity():
     )
     out = path_actors(_straight(), np.zeros(2), EGO_L, EGO_W, xy, yaw, speed, length, width, ped)
     assert math.isinf(out["leader_gap_m"])
-    (s0, d0, vs0, vd0), (s1, d1, vs1, vd1) = out["pedestrians"]
+    (s0, d0, vs0, vd0, held0), (s1, d1, vs1, vd1, held1) = out["pedestrians"]
     assert (s0, d0) == pytest.approx((15.0 - 2.25, -4.0)) and (vs0, vd0) == pytest.approx((0.0, 1.3), abs=1e-6)
     assert (s1, d1) == pytest.approx((25.0 - 2.25, 5.0)) and (vs1, vd1) == pytest.approx((1.2, 0.0), abs=1e-6)
+    assert not held0 and not held1
+    held = path_actors(_straight(), np.zeros(2), EGO_L, EGO_W, xy, yaw, speed, length, width, ped,
+                       np.array([True, False, True]))
+    assert [p[4] for p in held["pedestrians"]] == [True, False]
 
 
 def test_path_actors_follows_the_path_around_a_corner():
@@ -93,6 +97,52 @@ def test_signal_schedule_predicts_the_link_signal_seen_in_sumo():
     assert len(changes) >= 2  # a fixed-time program changes within a minute
     assert [c for _, c in schedule[1:len(changes) + 1]] == [c for _, c in changes]
     assert [t for t, _ in schedule[1:len(changes) + 1]] == pytest.approx([t for t, _ in changes], abs=0.11)
+
+
+def test_lights_ahead_off_the_route_are_the_ones_the_detectors_judge():
+    """Past a goal it missed, on the route's continuation (no edge of the route), the ego still sees
+    the light ending its lane: the one the red-light detector judges. Town03 NavigationDynamic 4 and
+    39 (continuous) entered a short goal edge one lane off, drove on and ran the next red blind."""
+    from types import SimpleNamespace
+
+    from hbmp_bench.envs.vehicle import GoalRoute, followed_stop_line
+    from hbmp_bench.metrics import LaneLocator
+    from hbmp_bench.scenarios import road_network, suite_episodes
+    from hbmp_bench.sim.sumo import LightAhead
+
+    net = road_network("Town01")
+    locator = LaneLocator(net)
+    episode = suite_episodes("hbmp", "Town01", "NavigationDynamic")[0]
+    lane = next(lane for lane in net.lanes  # a signalised lane off the route
+                if net.lanes[lane].edge not in episode.route and locator.stop_line(lane, None) is not None)
+    sim = SimpleNamespace(light_state=lambda tls, index: "r", light_ahead=lambda vehicle_id: None)
+    route = GoalRoute(episode, "continuous")
+    pos = net.lane(lane).length - 20.0  # 20 m before the stop line
+    xy, ahead = net.position(lane, pos), net.position(lane, pos + 1.0)
+    yaw = float(np.arctan2(*(ahead - xy)[::-1]))
+    vehicle = SimpleNamespace(id="ego", shared=SimpleNamespace(net=net, sim=sim, locator=locator), followed_lane=lane,
+                              state=SimpleNamespace(lane=lane, lane_pos=pos, xy=xy, yaw=yaw),
+                              front=xy + 2.25 * np.array([np.cos(yaw), np.sin(yaw)]))
+    vehicle.next_edges = lambda count=3: route.edges[route.index() + 1: route.index() + 1 + count]
+    route.v = vehicle
+    route._set(episode.route)
+
+    judged = followed_stop_line(sim, locator, lane, next(iter(vehicle.next_edges(1)), None))
+    lights = route._route_lights()
+    assert judged is not None and len(lights) == 1
+    assert (lights[0].state, lights[0].distance) == ("r", pytest.approx(20.0 - 2.25, abs=0.3))
+    assert (lights[0].tls, lights[0].link_index) == locator.stop_line(lane, next(iter(vehicle.next_edges(1)), None))[2:]
+
+    # on the route's last edge, past its end (in the junction after a goal it missed): SUMO's next
+    # light on the route's continuation, for the expert (R_t keeps the route's lights only)
+    goal = episode.goal_lane
+    pos = net.lane(goal).length
+    xy = net.position(goal, pos)
+    vehicle.followed_lane, vehicle.state = goal, SimpleNamespace(lane=":junction", lane_pos=0.0, xy=xy, yaw=0.0)
+    vehicle.front = xy
+    sumo_next = LightAhead("tls", 3, 25.0, "r")
+    sim.light_ahead = lambda vehicle_id: sumo_next
+    assert sumo_next in route._route_lights() and sumo_next not in route._route_lights(first_only=True)
 
 
 @pytest.mark.slow

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from hbmp_bench.planning import Path, wrap_angle
+from hbmp_bench.planning import Path, round_corners, wrap_angle
 
 
 def circle(R, n=361, ccw=True, center=(0.0, 0.0), a0=0.0, a1=2 * np.pi):
@@ -175,3 +175,26 @@ def test_resample_extrapolate():
     np.testing.assert_allclose(r.xy[:, 0], np.arange(-5.0, 16.0))
     c = p.resample(1.0, -5.0, 15.0)
     assert c.s[0] == 0.0 and c.s[-1] == 10.0
+
+
+def _lane_joint():
+    """A lane ending in a vertex repeated by the junction lane, which bends 23 degrees 4.97 m on
+    and repeats the vertex 0.17 m after the bend, then turns on in 4 m chords (Town02's shapes
+    where a lane meets a junction lane)."""
+    heading = np.radians([0.0, 0.0, 0.0, 23.0, 23.0, 23.0, 51.0, 74.0, 82.0])
+    length = np.array([20.0, 0.0, 4.97, 0.17, 0.0, 3.93, 4.1, 4.97, 20.0])
+    steps = length[:, None] * np.stack([np.cos(heading), np.sin(heading)], axis=1)
+    return np.vstack([[0.0, 0.0], np.cumsum(steps, axis=0)])
+
+
+def test_round_corners_min_spacing_spreads_a_kink_next_to_a_short_segment():
+    xy = _lane_joint()
+    sharp = Path(round_corners(xy, 3), max_spacing=1.0)
+    merged = Path(round_corners(xy, 3, min_spacing=1.0), max_spacing=1.0)
+    assert np.abs(sharp.kappa).max() > 1.0  # a radius under 1 m where the corner has ~8 m
+    assert np.abs(merged.kappa).max() < 0.3
+    np.testing.assert_allclose(merged.xy[[0, -1]], xy[[0, -1]])
+    _, e, _, _ = Path(xy, max_spacing=0.2).project(merged.xy, np.zeros(len(merged.xy)))
+    assert np.abs(e).max() < 0.5  # still on the lane
+    with pytest.raises(ValueError):
+        round_corners(xy, 3, min_spacing=-1.0)
