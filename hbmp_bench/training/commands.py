@@ -1,6 +1,7 @@
 """``hbmp-bench train {il,hbmp,hbmp-s,flat}`` and ``hbmp-bench curves``.
 
-    hbmp-bench train il     --episodes N --workers W --seed S --out DIR   DAgger, event fidelity
+    hbmp-bench train il     --episodes N --workers W --seed S --out DIR   DAgger, event fidelity (the paper's;
+                                                                          --fidelity continuous: the shipped il)
     hbmp-bench train hbmp   ... [--init il|CKPT|none]                     PPO, r_k + r_T, continuous fidelity
     hbmp-bench train hbmp-s ...                                           PPO, r_T only
     hbmp-bench train flat   ...                                           PPO on acceleration and steering
