@@ -39,6 +39,7 @@ def _command_line(args: argparse.Namespace) -> str:
     for flag, value in (("--fidelity", args.fidelity), ("--observation", args.observation),
                         ("--road-profile", args.road_profile), ("--density", args.density), ("--init", args.init), ("--resume", args.resume),
                         ("--critic-warmup", None if args.critic_warmup is None else str(args.critic_warmup)),
+                        ("--entropy-coef", None if args.entropy_coef is None else str(args.entropy_coef)),
                         ("--backend", None if args.backend == "process" else args.backend),
                         ("--address", args.address)):
         if value is not None:
@@ -129,7 +130,9 @@ def _cmd_train(args: argparse.Namespace) -> int:
             if warmup is None:
                 warmup = CRITIC_WARMUP_EPISODES if init is not None else 0
             # a resumed run keeps the options its checkpoint recorded
-            ppo = None if args.resume else PPOConfig(mask_actions=args.mask_actions, critic_warmup_episodes=warmup)
+            options = {} if args.entropy_coef is None else {"entropy_coef": args.entropy_coef}
+            ppo = None if args.resume else PPOConfig(mask_actions=args.mask_actions, critic_warmup_episodes=warmup,
+                                                     **options)
             result = train_ppo(run, env_config, ppo, init=init, init_label=label)
     except KeyboardInterrupt:  # the trainer has closed its workers on the way out
         raise Interrupted(_resume_hint(args)) from None
@@ -199,6 +202,8 @@ def add_commands(subparsers) -> None:
     p.add_argument("--critic-warmup", type=int, default=None, metavar="EPISODES",
                    help=f"PPO: episodes at the start in which only the critic learns (default: "
                         f"{CRITIC_WARMUP_EPISODES} from an IL actor, 0 from a random one)")
+    p.add_argument("--entropy-coef", type=float, default=None, metavar="C",
+                   help="PPO: weight of the entropy bonus in the loss (default: rsl-rl's 0.01; the paper gives none)")
     p.add_argument("--save-every", type=int, default=50, help="checkpoint every N episodes")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_train)

@@ -13,7 +13,7 @@ Deviations from the paper, and why:
 - Batch size 32 is the mini-batch: each iteration collects ``num_steps_per_env`` decisions in
   each worker and splits them into mini-batches of 32.
 - Not given in the paper, rsl-rl's defaults kept: GAE λ = 0.95, 5 epochs per iteration, entropy
-  coefficient 0.01, value-loss coefficient 1, gradient-norm clip 1, clipped value loss.
+  coefficient 0.01 (``--entropy-coef``), value-loss coefficient 1, gradient-norm clip 1, clipped value loss.
 - Rewards are scaled by ``reward_scale`` = 0.01 for learning (r_T is ±100 / −50, which the
   clipped value loss would follow only slowly); advantages are normalised, so the policy
   gradient does not depend on the scale. Logs keep the unscaled rewards.
@@ -127,6 +127,8 @@ class PPOConfig:
         for name in ("actor_learning_rate", "critic_learning_rate", "clip_param", "reward_scale", "init_std"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        if not self.entropy_coef >= 0:
+            raise ValueError(f"entropy_coef must be >= 0, got {self.entropy_coef}")
         if not 0 < self.gamma <= 1 or not 0 <= self.lam <= 1:
             raise ValueError("gamma must be in (0, 1] and lam in [0, 1]")
         if self.mini_batch_size < 1 or self.num_steps_per_env < 1 or self.num_learning_epochs < 1:

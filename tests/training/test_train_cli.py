@@ -67,12 +67,13 @@ def test_hbmp_from_il_warms_up_the_critic_learns_and_resumes(il_run, tmp_path):
     out = str(tmp_path / "hbmp")
     il_policy = os.path.join(il_run, "policy.pt")
     assert main(["train", "hbmp", "--episodes", "2", "--workers", "1", "--out", out, "--init", il_policy,
-                 "--critic-warmup", "2", *COMMON]) == 0
+                 "--critic-warmup", "2", "--entropy-coef", "0.002", *COMMON]) == 0
     _files_of_a_run(out, 2)
     first = torch.load(os.path.join(out, "checkpoint.pt"), weights_only=True)
     il = torch.load(il_policy, weights_only=True)
     assert first["kind"] == "hbmp" and first["train"]["reward"] == "dense" and first["train"]["init"] == il_policy
-    assert first["train"]["ppo.critic_warmup_episodes"] == 2
+    assert first["train"]["ppo.critic_warmup_episodes"] == 2 and first["train"]["ppo.entropy_coef"] == 0.002
+    assert "--entropy-coef 0.002" in open(os.path.join(out, "MODEL_CARD.md")).read()
     assert "optimizer_state_dict" not in first, "a PPO checkpoint is small enough to commit: no Adam moments"
     assert all(torch.equal(il["actor_state_dict"][k], v) for k, v in first["actor_state_dict"].items()), \
         "during the critic warm-up the IL actor does not move"
@@ -86,7 +87,7 @@ def test_hbmp_from_il_warms_up_the_critic_learns_and_resumes(il_run, tmp_path):
                  "--resume", os.path.join(out, "checkpoint.pt"), *COMMON]) == 0
     second = torch.load(os.path.join(out, "checkpoint.pt"), weights_only=True)
     assert second["progress"]["episodes"] == 3 and second["progress"]["iterations"] > first["progress"]["iterations"]
-    assert second["train"]["ppo.critic_warmup_episodes"] == 2
+    assert second["train"]["ppo.critic_warmup_episodes"] == 2 and second["train"]["ppo.entropy_coef"] == 0.002
     assert read_csv(os.path.join(out, "episodes.csv"))["episode"].tolist() == [1, 2, 3]
     assert any(not torch.equal(first["actor_state_dict"][k], v) for k, v in second["actor_state_dict"].items()), \
         "PPO changed the IL-initialised policy after the warm-up"
