@@ -187,7 +187,7 @@ class PrivilegedScene:
         held = {p for c, waiting in crossings if c["signal"] and c["signal"] in RED + YELLOW for p in waiting}
         out = path_actors(self._path(lane, tuple(next_edges[:3]), link.via if link is not None else ""), ego.xy,
                           self.vtype.length, self.vtype.width, actors.xy, actors.yaw, actors.speed, actors.length,
-                          actors.width, actors.is_pedestrian, np.array([i in held for i in actors.ids], dtype=bool))
+                          actors.width, actors.is_pedestrian, np.isin(actors.ids, list(held)) if held else None)
         out["lights_ahead"] = tuple((float(light.distance), light.state,
                                      self.sim.signal_schedule(light.tls, light.link_index))
                                     for light in lights if light.distance <= LIGHTS_RANGE_M)

@@ -9,7 +9,7 @@ leaderboard folder (one that runs as ``nobody`` cannot, see ``sandbox``). So the
 - notes the leaderboard folder's results files before a submission runs (``BoardSnapshot``) and
   refuses to write its entry when one was added, changed or removed meanwhile.
 
-One evaluation at a time writes a records file (``RecordsLock``): a second one started on the same
+One evaluation at a time writes a records file (``records_lock``): a second one started on the same
 file (the same suite, agent and ``--out``) is refused with a message naming the running one,
 rather than both appending and the ledger reporting the other's records as tampering.
 
