@@ -23,13 +23,11 @@ trustworthy as the runs that wrote them.
 from __future__ import annotations
 
 import contextlib
-import fcntl
 import hashlib
 import os
-from collections.abc import Iterator
 from pathlib import Path
 
-from hbmp_bench.errors import UserError
+from hbmp_bench.locks import Busy, exclusive_lock
 from hbmp_bench.metrics.records import EpisodeRecord, append_record, parse_records, record_line
 
 
@@ -51,30 +49,16 @@ def quarantine(path: Path) -> Path | None:
     return target
 
 
-class EvaluationRunning(UserError):
+class EvaluationRunning(Busy):
     """Another evaluation holds the records file's lock."""
 
 
-@contextlib.contextmanager
-def records_lock(path: str | os.PathLike) -> Iterator[None]:
+def records_lock(path: str | os.PathLike) -> contextlib.AbstractContextManager[None]:
     """Hold the exclusive lock ``<records>.lock`` for the block; raise :class:`EvaluationRunning` at once
-    when another process holds it. The lock file stays (removing it would race with a waiter); it
-    holds the pid of the last evaluation that took it."""
-    lock_path = Path(path).with_name(Path(path).name + ".lock")
-    fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.pread(fd, 32, 0).decode("ascii", "replace").strip() or "unknown"
-            raise EvaluationRunning(
-                f"another evaluation (pid {holder}) is writing {path}: wait for it to finish, or evaluate into "
-                f"another --out folder") from None
-        os.ftruncate(fd, 0)
-        os.pwrite(fd, f"{os.getpid()}\n".encode("ascii"), 0)
-        yield
-    finally:
-        os.close(fd)  # releases the lock
+    when another process holds it (:func:`hbmp_bench.locks.exclusive_lock`)."""
+    return exclusive_lock(Path(path).with_name(Path(path).name + ".lock"), lambda holder: EvaluationRunning(
+        f"another evaluation (pid {holder}) is writing {path}: wait for it to finish, or evaluate into another "
+        "--out folder"))
 
 
 class RecordsLedger:

@@ -21,6 +21,7 @@ import shlex
 import time
 
 from hbmp_bench.errors import Interrupted
+from hbmp_bench.locks import Busy, exclusive_lock
 from hbmp_bench.training.checkpoints import KINDS
 
 DEFAULT_EPISODES = {"il": 3000, "hbmp": 6000, "hbmp-s": 6000, "flat": 6000}
@@ -39,11 +40,12 @@ def _command_line(args: argparse.Namespace) -> str:
     for flag, value in (("--fidelity", args.fidelity), ("--observation", args.observation),
                         ("--road-profile", args.road_profile), ("--density", args.density), ("--init", args.init), ("--resume", args.resume),
                         ("--critic-warmup", None if args.critic_warmup is None else str(args.critic_warmup)),
-                        ("--entropy-coef", None if args.entropy_coef is None else str(args.entropy_coef)),
                         ("--backend", None if args.backend == "process" else args.backend),
                         ("--address", args.address)):
         if value is not None:
             parts += [flag, value]
+    for assignment in args.ppo:
+        parts += ["--ppo", assignment]
     if args.mask_actions:
         parts.append("--mask-actions")
     return " ".join(shlex.quote(p) for p in parts)
@@ -86,6 +88,10 @@ def recorded_env_options(checkpoint: str, names: tuple[str, ...]) -> dict[str, s
     return {k: recorded[k] for k in names if k in recorded}
 
 
+class TrainingRunning(Busy):
+    """Another training run holds the run folder's lock."""
+
+
 def _cmd_train(args: argparse.Namespace) -> int:
     from hbmp_bench.training.run import RunConfig
     from hbmp_bench.training.worker import WorkerEnvConfig
@@ -95,7 +101,17 @@ def _cmd_train(args: argparse.Namespace) -> int:
         args.episodes = DEFAULT_EPISODES[kind]
     if args.out is None:
         args.out = os.path.join("runs", f"{kind}__{args.scenario.split('/')[-1]}__{args.seed}__{int(time.time())}")
+    if args.ppo and kind == "il":
+        raise ValueError("--ppo options apply to hbmp, hbmp-s and flat (il is trained by DAgger)")
+    if args.ppo and args.resume:
+        raise ValueError("a resumed run keeps the PPO options its checkpoint recorded; start a new --out to change "
+                         "them")
     init = resolve_init(kind, args.init) if args.resume is None else None
+    if args.ppo:  # bad names and values fail before any worker starts
+        from hbmp_bench.training.ppo import PPOConfig
+
+        if PPOConfig.parse_assignments(args.ppo).get("anchor_coef", 0) > 0 and init is None:
+            raise ValueError("--ppo anchor_coef needs an --init actor to anchor to")
     source = (args.resume, RUN_OPTIONS) if args.resume else (init, INPUT_OPTIONS) if init else None
     for name, value in (recorded_env_options(*source) if source else {}).items():
         if getattr(args, name) is None:
@@ -117,23 +133,11 @@ def _cmd_train(args: argparse.Namespace) -> int:
                     address=args.address, seed=args.seed,
                     save_every=args.save_every, resume=args.resume, command=_command_line(args),
                     progress=not args.no_progress)
+    os.makedirs(args.out, exist_ok=True)
     try:
-        if kind == "il":
-            from hbmp_bench.training.dagger import DaggerConfig, train_dagger
-
-            result = train_dagger(run, env_config, DaggerConfig(mask_actions=args.mask_actions))
-        else:
-            from hbmp_bench.training.ppo import PPOConfig, train_ppo
-
-            label = None if init is None else (args.init or "il")
-            warmup = args.critic_warmup
-            if warmup is None:
-                warmup = CRITIC_WARMUP_EPISODES if init is not None else 0
-            # a resumed run keeps the options its checkpoint recorded
-            options = {} if args.entropy_coef is None else {"entropy_coef": args.entropy_coef}
-            ppo = None if args.resume else PPOConfig(mask_actions=args.mask_actions, critic_warmup_episodes=warmup,
-                                                     **options)
-            result = train_ppo(run, env_config, ppo, init=init, init_label=label)
+        with exclusive_lock(os.path.join(args.out, "train.lock"), lambda holder: TrainingRunning(
+                f"another training run (pid {holder}) is writing {args.out}: wait for it, or train into another --out")):
+            result = _train(kind, run, env_config, args, init)
     except KeyboardInterrupt:  # the trainer has closed its workers on the way out
         raise Interrupted(_resume_hint(args)) from None
     p = result["progress"]
@@ -141,6 +145,25 @@ def _cmd_train(args: argparse.Namespace) -> int:
     print(f"run folder: {args.out}  (episodes.csv, curves.png, checkpoint.pt, MODEL_CARD.md)")
     print(f"policy: {result['policy']}  (evaluate: hbmp-bench run --agent {result['policy']})")
     return 0
+
+
+def _train(kind: str, run, env_config, args: argparse.Namespace, init: str | None) -> dict:
+    """DAgger for il, PPO otherwise; the run's progress and the path of its policy."""
+    if kind == "il":
+        from hbmp_bench.training.dagger import DaggerConfig, train_dagger
+
+        return train_dagger(run, env_config, DaggerConfig(mask_actions=args.mask_actions))
+    from hbmp_bench.training.ppo import PPOConfig, train_ppo
+
+    label = None if init is None else (args.init or "il")
+    warmup = args.critic_warmup
+    if warmup is None:
+        warmup = CRITIC_WARMUP_EPISODES if init is not None else 0
+    # a resumed run keeps the options its checkpoint recorded
+    options = {"mask_actions": args.mask_actions, "critic_warmup_episodes": warmup,
+               **PPOConfig.parse_assignments(args.ppo)}
+    ppo = None if args.resume else PPOConfig(**options)
+    return train_ppo(run, env_config, ppo, init=init, init_label=label)
 
 
 def _resume_hint(args: argparse.Namespace) -> str:
@@ -202,8 +225,10 @@ def add_commands(subparsers) -> None:
     p.add_argument("--critic-warmup", type=int, default=None, metavar="EPISODES",
                    help=f"PPO: episodes at the start in which only the critic learns (default: "
                         f"{CRITIC_WARMUP_EPISODES} from an IL actor, 0 from a random one)")
-    p.add_argument("--entropy-coef", type=float, default=None, metavar="C",
-                   help="PPO: weight of the entropy bonus in the loss (default: rsl-rl's 0.01; the paper gives none)")
+    p.add_argument("--ppo", action="append", default=[], metavar="NAME=VALUE",
+                   help="PPO option, repeatable: any field of hbmp_bench.training.ppo.PPOConfig, e.g. "
+                        "entropy_coef=0.001, anchor_coef=1, desired_kl=0.01, num_steps_per_env=256 "
+                        "(defaults: the paper's values, rsl-rl's where it gives none)")
     p.add_argument("--save-every", type=int, default=50, help="checkpoint every N episodes")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_train)

@@ -8,12 +8,23 @@ bookkeeping of a run (episode CSV, checkpoints, resume, curves, model card).
 Deviations from the paper, and why:
 - Two learning rates. rsl-rl's PPO has one optimizer; :class:`TwoRatePPO` gives it two Adam
   parameter groups, the actor's at ``LR_a`` = 1e-4 and the critic's at ``LR_c`` = 5e-4. Actor and
-  critic share no weights, so this is the same as two Adam optimizers. The learning rate is
-  fixed (rsl-rl's adaptive KL schedule would set both groups to one rate).
+  critic share no weights, so this is the same as two Adam optimizers. Fixed by default; with
+  ``desired_kl`` the actor's rate follows rsl-rl's adaptive rule (÷1.5 when the mini-batch KL to the
+  roll-out policy exceeds 2 × desired, ×1.5 below ½ × desired), the critic's stays at ``LR_c``
+  (rsl-rl's own schedule would set both groups to one rate).
+- IL anchor (not in the paper; ``anchor_coef``, default 0): the loss gains
+  ``anchor_coef · KL(π_IL(·|s) ‖ π(·|s))`` over the mini-batch's states, π_IL the frozen ``--init``
+  actor. Why: from a peaked IL policy, PPO's ratio clip is lopsided in probability space. A behavior
+  the IL policy picks with p = 0.95 can lose up to 20 % of it after one failed episode
+  (0.95 → 0.76) but gain at most 5 % after a success, so advantage noise alone (1-2 episodes per
+  iteration, a ±100 terminal reward) flattens the policy: measured, the entropy rose 0.33 → 0.42 and
+  training success fell 49 → 29 % over 200 episodes with the paper's settings
+  (``training_runs/hbmp-cont``). The anchor keeps the policy where the data do not say otherwise; the
+  KL to π_IL is logged per iteration (``kl_init``).
 - Batch size 32 is the mini-batch: each iteration collects ``num_steps_per_env`` decisions in
   each worker and splits them into mini-batches of 32.
 - Not given in the paper, rsl-rl's defaults kept: GAE λ = 0.95, 5 epochs per iteration, entropy
-  coefficient 0.01 (``--entropy-coef``), value-loss coefficient 1, gradient-norm clip 1, clipped value loss.
+  coefficient 0.01; any of them can be set with ``train --ppo NAME=VALUE``, value-loss coefficient 1, gradient-norm clip 1, clipped value loss.
 - Rewards are scaled by ``reward_scale`` = 0.01 for learning (r_T is ±100 / −50, which the
   clipped value loss would follow only slowly); advantages are normalised, so the policy
   gradient does not depend on the scale. Logs keep the unscaled rewards.
@@ -34,6 +45,7 @@ happens after each iteration in :class:`RunLogger`, rsl-rl's logger with one hoo
 from __future__ import annotations
 
 import contextlib
+import copy
 import dataclasses
 import io
 import os
@@ -43,6 +55,7 @@ from typing import Any
 
 import torch
 from rsl_rl.algorithms import PPO
+from torch import nn
 from rsl_rl.utils import resolve_optimizer
 from rsl_rl.utils.logger import Logger
 
@@ -56,36 +69,118 @@ MASK_GROUP = "action_mask"
 
 
 class TwoRatePPO(PPO):
-    """rsl-rl PPO with separate learning rates for the actor and the critic.
+    """rsl-rl PPO with separate learning rates for the actor and the critic, an optional adaptive actor
+    rate and an optional KL anchor to the initial (IL) actor.
 
     Args:
-        actor_learning_rate: Adam learning rate of the actor's parameters (paper: 1e-4).
+        actor_learning_rate: Adam learning rate of the actor's parameters (paper: 1e-4); the start
+            value when ``desired_kl`` is given.
         critic_learning_rate: Adam learning rate of the critic's parameters (paper: 5e-4).
-        schedule: must be ``fixed``.
+        desired_kl: None (fixed actor rate) or the target KL per mini-batch of the adaptive actor rate.
+        anchor_coef: weight of KL(π_anchor ‖ π) in the loss; the anchor is set by :meth:`set_anchor`.
+        schedule: must be ``fixed`` (the adaptive rule here is the actor's only: ``desired_kl``).
         other arguments: as ``rsl_rl.algorithms.PPO``.
     """
 
+    ACTOR_LR_BOUNDS = (1e-6, 1e-3)
+    """Range of the adaptive actor rate [1/step] (rsl-rl's is 1e-5..1e-2, for from-scratch locomotion)."""
+
     def __init__(self, actor, critic, storage, actor_learning_rate: float = 1e-4, critic_learning_rate: float = 5e-4,
-                 optimizer: str = "adam", schedule: str = "fixed", **kwargs: Any) -> None:
+                 desired_kl: float | None = None, anchor_coef: float = 0.0, optimizer: str = "adam",
+                 schedule: str = "fixed", **kwargs: Any) -> None:
         if schedule != "fixed":
-            raise ValueError("TwoRatePPO keeps two fixed learning rates; schedule must be 'fixed'")
+            raise ValueError("TwoRatePPO's adaptive rate is the actor's only: give desired_kl, keep schedule 'fixed'")
         if "learning_rate" in kwargs:
             raise ValueError("give actor_learning_rate and critic_learning_rate instead of learning_rate")
         super().__init__(actor, critic, storage, learning_rate=actor_learning_rate, optimizer=optimizer,
                          schedule="fixed", **kwargs)
         self.actor_learning_rate = actor_learning_rate
+        self.actor_desired_kl = desired_kl
+        self.anchor_coef = anchor_coef
+        self.anchor = None
         self.optimizer = resolve_optimizer(optimizer)([
             {"params": list(self.actor.parameters()), "lr": actor_learning_rate},
             {"params": list(self.critic.parameters()), "lr": critic_learning_rate},
         ])
+        self._frozen = False
+
+    def set_anchor(self, state_dict: dict[str, torch.Tensor]) -> None:
+        """Freeze a copy of the actor with ``state_dict`` as π_anchor (the IL policy)."""
+        self.anchor = copy.deepcopy(self.actor)
+        self.anchor.load_state_dict(state_dict)
+        self.anchor.eval()
+        for param in self.anchor.parameters():
+            param.requires_grad_(False)
 
     def freeze_actor(self, frozen: bool) -> None:
         """Actor learning rate 0 (critic warm-up) or ``actor_learning_rate``; the critic's is unchanged."""
+        self._frozen = frozen
         self.optimizer.param_groups[0]["lr"] = 0.0 if frozen else self.actor_learning_rate
 
     @property
     def actor_frozen(self) -> bool:
-        return self.optimizer.param_groups[0]["lr"] == 0.0
+        return self._frozen
+
+    def update(self) -> dict[str, float]:
+        """rsl-rl's PPO update for what this package uses (feed-forward models, one process, no RND, no
+        symmetry), with the actor-only adaptive rate and the anchor term. Returns the mean losses, the
+        mean KL to the anchor (``kl_init``, 0 without one) and the actor's rate at the end (``actor_lr``)."""
+        if self.actor.is_recurrent or self.critic.is_recurrent or self.rnd or self.symmetry or self.is_multi_gpu:
+            raise NotImplementedError("TwoRatePPO.update covers feed-forward models on one process only")
+        sums = {"value": 0.0, "surrogate": 0.0, "entropy": 0.0, "kl_init": 0.0}
+        updates = 0
+        for batch in self.storage.mini_batch_generator(self.num_mini_batches, self.num_learning_epochs):
+            if self.normalize_advantage_per_mini_batch:
+                with torch.no_grad():
+                    batch.advantages = (batch.advantages - batch.advantages.mean()) / (batch.advantages.std() + 1e-8)
+            self.actor(batch.observations, masks=batch.masks, stochastic_output=True)
+            log_prob = self.actor.get_output_log_prob(batch.actions)
+            params = self.actor.output_distribution_params
+            entropy = self.actor.output_entropy
+            values = self.critic(batch.observations, masks=batch.masks)
+            if self.actor_desired_kl is not None and not self._frozen:
+                with torch.no_grad():
+                    kl = self.actor.get_kl_divergence(batch.old_distribution_params, params).mean().item()
+                low, high = self.ACTOR_LR_BOUNDS
+                if kl > 2.0 * self.actor_desired_kl:
+                    self.actor_learning_rate = max(low, self.actor_learning_rate / 1.5)
+                elif 0.0 < kl < 0.5 * self.actor_desired_kl:
+                    self.actor_learning_rate = min(high, self.actor_learning_rate * 1.5)
+                self.optimizer.param_groups[0]["lr"] = self.actor_learning_rate
+            ratio = torch.exp(log_prob - torch.squeeze(batch.old_actions_log_prob))
+            advantages = torch.squeeze(batch.advantages)
+            surrogate = torch.max(-advantages * ratio,
+                                  -advantages * torch.clamp(ratio, 1.0 - self.clip_param, 1.0 + self.clip_param)).mean()
+            if self.use_clipped_value_loss:
+                clipped = batch.values + (values - batch.values).clamp(-self.clip_param, self.clip_param)
+                value_loss = torch.max((values - batch.returns).pow(2), (clipped - batch.returns).pow(2)).mean()
+            else:
+                value_loss = (batch.returns - values).pow(2).mean()
+            loss = surrogate + self.value_loss_coef * value_loss - self.entropy_coef * entropy.mean()
+            if self.anchor is not None:
+                with torch.no_grad():
+                    self.anchor(batch.observations, masks=batch.masks, stochastic_output=True)
+                    anchor_params = tuple(p.detach() for p in self.anchor.output_distribution_params)
+                kl_init = self.actor.get_kl_divergence(anchor_params, params).mean()
+                if self.anchor_coef > 0:
+                    loss = loss + self.anchor_coef * kl_init
+                sums["kl_init"] += kl_init.item()
+            self.optimizer.zero_grad()
+            loss.backward()
+            nn.utils.clip_grad_norm_(self.actor.parameters(), self.max_grad_norm)
+            nn.utils.clip_grad_norm_(self.critic.parameters(), self.max_grad_norm)
+            self.optimizer.step()
+            sums["value"] += value_loss.item()
+            sums["surrogate"] += surrogate.item()
+            sums["entropy"] += entropy.mean().item()
+            updates += 1
+        observations = self.storage.observations.flatten(0, 1)
+        self.actor.update_normalization(observations)
+        self.critic.update_normalization(observations)
+        self.storage.clear()
+        if self.anchor is None:
+            del sums["kl_init"]
+        return {**{k: v / max(updates, 1) for k, v in sums.items()}, "actor_lr": self.actor_learning_rate}
 
 
 @dataclass(frozen=True)
@@ -105,6 +200,8 @@ class PPOConfig:
         init_std: initial standard deviation of the flat baseline's Gaussian controls.
         critic_warmup_episodes: episodes at the start of a run during which only the critic
             learns (the actor's learning rate is 0); see the module notes.
+        desired_kl: None (fixed LR_a) or the per-mini-batch KL the adaptive actor rate aims at.
+        anchor_coef: weight of the KL to the ``--init`` actor in the loss (0: none); see the module notes.
     """
 
     actor_learning_rate: float = 1e-4
@@ -122,19 +219,51 @@ class PPOConfig:
     mask_actions: bool = False
     init_std: float = 0.5
     critic_warmup_episodes: int = 0
+    desired_kl: float | None = None
+    anchor_coef: float = 0.0
 
     def __post_init__(self):
         for name in ("actor_learning_rate", "critic_learning_rate", "clip_param", "reward_scale", "init_std"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        if not self.entropy_coef >= 0:
-            raise ValueError(f"entropy_coef must be >= 0, got {self.entropy_coef}")
+        for name in ("entropy_coef", "anchor_coef"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.desired_kl is not None and not self.desired_kl > 0:
+            raise ValueError(f"desired_kl must be > 0 or None, got {self.desired_kl}")
         if not 0 < self.gamma <= 1 or not 0 <= self.lam <= 1:
             raise ValueError("gamma must be in (0, 1] and lam in [0, 1]")
         if self.mini_batch_size < 1 or self.num_steps_per_env < 1 or self.num_learning_epochs < 1:
             raise ValueError("mini_batch_size, num_steps_per_env and num_learning_epochs must be >= 1")
         if self.critic_warmup_episodes < 0:
             raise ValueError(f"critic_warmup_episodes must be >= 0, got {self.critic_warmup_episodes}")
+
+    @classmethod
+    def parse_assignments(cls, assignments: list[str]) -> dict[str, Any]:
+        """``["name=value", ...]`` from the command line as typed field values (``none`` for None).
+
+        Raises ValueError naming the valid fields for an unknown name, and for a malformed value.
+        """
+        fields = {f.name: f for f in dataclasses.fields(cls)}
+        parsed: dict[str, Any] = {}
+        for text in assignments:
+            name, sep, value = text.partition("=")
+            if not sep or name not in fields:
+                raise ValueError(f"--ppo takes NAME=VALUE with NAME one of {', '.join(fields)}; got {text!r}")
+            default = fields[name].default
+            if value.lower() == "none" and default is None:
+                parsed[name] = None
+            elif isinstance(default, bool):
+                if value.lower() not in ("true", "false", "1", "0"):
+                    raise ValueError(f"--ppo {name} takes true or false, got {value!r}")
+                parsed[name] = value.lower() in ("true", "1")
+            else:
+                kind = int if isinstance(default, int) else float
+                try:
+                    parsed[name] = kind(value)
+                except ValueError:
+                    raise ValueError(f"--ppo {name} takes a number ({kind.__name__}), got {value!r}") from None
+        return parsed
 
     @classmethod
     def from_options(cls, options: dict[str, Any]) -> PPOConfig:
@@ -165,6 +294,8 @@ class PPOConfig:
                 "value_loss_coef": self.value_loss_coef,
                 "max_grad_norm": self.max_grad_norm,
                 "schedule": "fixed",
+                "desired_kl": self.desired_kl,
+                "anchor_coef": self.anchor_coef,
             },
             "actor": dict(actor),
             "critic": dict(critic),
@@ -278,9 +409,14 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
         alg = runner.alg
         if resume is not None:
             alg.load(resume, {"actor": True, "critic": True, "optimizer": "optimizer_state_dict" in resume}, strict=True)
+            if "anchor_state_dict" in resume:
+                alg.set_anchor(resume["anchor_state_dict"])
         elif init_ckpt is not None:
             check_init_compatible(init_ckpt, info)
             alg.get_policy().load_state_dict(init_ckpt["actor_state_dict"])
+            alg.set_anchor(init_ckpt["actor_state_dict"])
+        if ppo.anchor_coef > 0 and alg.anchor is None:
+            raise ValueError("anchor_coef > 0 needs an --init actor to anchor to")
         options = {"kind": run.kind, "workers": run.workers, "backend": run.backend,
                    "init": (init_label or init) if resume is None else None,
                    **{f"env.{k}": v for k, v in info["env"].items()}, "reward": env_config.reward,
@@ -289,8 +425,9 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
             options["init"] = resume["train"].get("init")
 
         def checkpoint() -> dict[str, Any]:
+            anchor = {} if alg.anchor is None else {"anchor_state_dict": alg.anchor.state_dict()}
             return {"kind": run.kind, "model": info, "actor_state_dict": alg.get_policy().state_dict(),
-                    "critic_state_dict": alg.critic.state_dict(),
+                    "critic_state_dict": alg.critic.state_dict(), **anchor,
                     "progress": progress.to_dict(), "train": {"command": run.command, "seed": run.seed, **options}}
 
         log = CsvLog(run.path("episodes.csv"), EPISODE_COLUMNS, keep_through=progress.episodes if resume else None)
@@ -312,7 +449,8 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
                 bar.update(1)
             iterations.write({"iteration": progress.iterations, "episode": progress.episodes,
                               "decisions": progress.decisions, "actor_frozen": frozen,
-                              **{k: losses.get(k, "") for k in ("value", "surrogate", "entropy")},
+                              **{k: losses.get(k, "") for k in ("value", "surrogate", "entropy", "kl_init",
+                                                                  "actor_lr")},
                               "wall_s": progress.to_dict()["wall_s"]})
             alg.freeze_actor(progress.episodes < ppo.critic_warmup_episodes)
             if progress.episodes - last_save >= run.save_every:

@@ -18,14 +18,17 @@ import numpy as np
 EPISODE_COLUMNS = ("episode", "worker", "r_T", "r_T_plus_r_t", "train_return", "success", "infractions", "length",
                    "end_reason", "route_completion", "sim_time_s", "wall_s")
 DAGGER_COLUMNS = ("beta", "expert_share")
-ITERATION_COLUMNS = ("iteration", "episode", "decisions", "actor_frozen", "value", "surrogate", "entropy", "wall_s")
+ITERATION_COLUMNS = ("iteration", "episode", "decisions", "actor_frozen", "value", "surrogate", "entropy", "wall_s",
+                     "kl_init", "actor_lr")
 """PPO's ``iterations.csv``: after each rsl-rl iteration, the episodes finished by its end, the losses
-(mean over the update's mini-batches) and whether the actor was frozen (critic warm-up)."""
+(mean over the update's mini-batches), whether the actor was frozen (critic warm-up), the mean KL from the
+initial (IL) actor to the current one (empty without an initial actor) and the actor's learning rate."""
 ROUND_COLUMNS = ("round", "episodes", "dataset", "holdout", "loss", "train_agreement", "holdout_agreement", "wall_s")
 
 
 class CsvLog:
-    """Append-only CSV with a fixed header; reopening an existing file checks the header matches.
+    """Append-only CSV with a fixed header; reopening an existing file checks the header matches (a header
+    that is a prefix of ``columns``, written by an older version, gains the new columns).
 
     ``keep_through``: on reopening for a resume, drop the rows whose ``key`` column (``episode``)
     is beyond this number first (they were logged after the checkpoint the run resumes from, and
@@ -39,11 +42,12 @@ class CsvLog:
         if exists:
             with open(path, newline="") as f:
                 header = next(csv.reader(f), [])
-            if tuple(header) != self.columns:
+            older = len(header) < len(self.columns) and tuple(header) == self.columns[:len(header)]
+            if tuple(header) != self.columns and not older:
                 raise ValueError(f"{path!r} has columns {header}, expected {list(self.columns)}")
-            if keep_through is not None:
+            if keep_through is not None or older:  # an older log gains the new columns, empty in its rows
                 with open(path, newline="") as f:
-                    rows = [r for r in csv.DictReader(f) if int(r[key]) <= keep_through]
+                    rows = [r for r in csv.DictReader(f) if keep_through is None or int(r[key]) <= keep_through]
                 tmp = path + ".tmp"
                 with open(tmp, "w", newline="") as f:
                     writer = csv.DictWriter(f, fieldnames=self.columns)

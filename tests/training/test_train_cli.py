@@ -9,6 +9,8 @@ import torch
 from hbmp_bench.agents import load_agent
 from hbmp_bench.cli import main
 from hbmp_bench.envs import make
+from hbmp_bench.locks import exclusive_lock
+from hbmp_bench.training.commands import TrainingRunning
 from hbmp_bench.training.runlog import EPISODE_COLUMNS, read_csv
 
 SCENARIO = "hbmp_bench/Town02-Straight-v0"
@@ -67,19 +69,25 @@ def test_hbmp_from_il_warms_up_the_critic_learns_and_resumes(il_run, tmp_path):
     out = str(tmp_path / "hbmp")
     il_policy = os.path.join(il_run, "policy.pt")
     assert main(["train", "hbmp", "--episodes", "2", "--workers", "1", "--out", out, "--init", il_policy,
-                 "--critic-warmup", "2", "--entropy-coef", "0.002", *COMMON]) == 0
+                 "--critic-warmup", "2", "--ppo", "entropy_coef=0.002", "--ppo", "anchor_coef=0.5",
+                 "--ppo", "desired_kl=0.01", *COMMON]) == 0
     _files_of_a_run(out, 2)
     first = torch.load(os.path.join(out, "checkpoint.pt"), weights_only=True)
     il = torch.load(il_policy, weights_only=True)
     assert first["kind"] == "hbmp" and first["train"]["reward"] == "dense" and first["train"]["init"] == il_policy
     assert first["train"]["ppo.critic_warmup_episodes"] == 2 and first["train"]["ppo.entropy_coef"] == 0.002
-    assert "--entropy-coef 0.002" in open(os.path.join(out, "MODEL_CARD.md")).read()
+    assert first["train"]["ppo.anchor_coef"] == 0.5 and first["train"]["ppo.desired_kl"] == 0.01
+    assert "--ppo entropy_coef=0.002 --ppo anchor_coef=0.5" in open(os.path.join(out, "MODEL_CARD.md")).read()
+    assert all(torch.equal(il["actor_state_dict"][k], v) for k, v in first["anchor_state_dict"].items()), \
+        "the anchor is the --init actor, kept in the checkpoint for a resume"
     assert "optimizer_state_dict" not in first, "a PPO checkpoint is small enough to commit: no Adam moments"
     assert all(torch.equal(il["actor_state_dict"][k], v) for k, v in first["actor_state_dict"].items()), \
         "during the critic warm-up the IL actor does not move"
     iterations = read_csv(os.path.join(out, "iterations.csv"))
     assert iterations["iteration"].tolist() == list(range(1, first["progress"]["iterations"] + 1))
     assert (iterations["actor_frozen"] == 1).all() and iterations["value"].max() > 0, "the critic learns"
+    assert (abs(iterations["kl_init"]) < 1e-6).all(), "a frozen actor is the IL actor"
+    assert (iterations["actor_lr"] == 1e-4).all(), "the adaptive rate waits for the warm-up's end"
     _acts(os.path.join(out, "policy.pt"))
 
     # the resume keeps the recorded warm-up (2 episodes, over): the actor learns from episode 3 on
@@ -96,6 +104,9 @@ def test_hbmp_from_il_warms_up_the_critic_learns_and_resumes(il_run, tmp_path):
     iterations = read_csv(os.path.join(out, "iterations.csv"))
     assert iterations["iteration"].tolist() == list(range(1, second["progress"]["iterations"] + 1))
     assert iterations["actor_frozen"][-1] == 0
+    assert iterations["kl_init"][-1] > 0 and iterations["actor_lr"][-1] != 1e-4, \
+        "after the warm-up the actor moves away from the anchor at an adapted rate"
+    assert all(torch.equal(il["actor_state_dict"][k], v) for k, v in second["anchor_state_dict"].items())
 
     assert main(["curves", il_run, out, "--labels", "il", "hbmp", "--out", str(tmp_path / "fig.png")]) == 0
     assert os.path.getsize(tmp_path / "fig.png") > 1000
@@ -121,6 +132,21 @@ def test_clear_errors(il_run, tmp_path, capsys):
     assert "Town01-Straight-v0" in capsys.readouterr().err
     assert main(["train", "flat", "--fidelity", "event", "--out", str(tmp_path / "flat"), "--episodes", "1"]) == 2
     assert "continuous" in capsys.readouterr().err
+    assert main(["train", "hbmp", "--ppo", "entropy=0.1", "--out", str(tmp_path / "x"), *COMMON]) == 2
+    assert "entropy_coef" in capsys.readouterr().err and not os.path.exists(tmp_path / "x")
+    assert main(["train", "hbmp", "--ppo", "anchor_coef=lots", "--out", str(tmp_path / "x"), *COMMON]) == 2
+    assert "number" in capsys.readouterr().err
+    assert main(["train", "hbmp", "--ppo", "anchor_coef=1", "--init", "none", "--out", str(tmp_path / "x"),
+                 *COMMON]) == 2
+    assert "--init" in capsys.readouterr().err
+    assert main(["train", "hbmp", "--ppo", "anchor_coef=1", "--resume", os.path.join(il_run, "checkpoint.pt"),
+                 "--out", str(tmp_path / "x"), *COMMON]) == 2
+    assert "recorded" in capsys.readouterr().err
+    busy = tmp_path / "busy"
+    busy.mkdir()
+    with exclusive_lock(busy / "train.lock", TrainingRunning):  # a run already writing that folder
+        assert main(["train", "hbmp", "--episodes", "1", "--out", str(busy), *COMMON]) == 2
+    assert f"pid {os.getpid()}" in capsys.readouterr().err and os.listdir(busy) == ["train.lock"]
 
 
 def test_flat_trains_on_the_control_env_and_is_evaluated_there(tmp_path):
