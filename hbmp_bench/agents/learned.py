@@ -5,7 +5,12 @@ Each loads a checkpoint shipped in ``hbmp_bench/agents/checkpoints/<name>.pt`` (
 checkpoint loads with ``load_agent("path/to/policy.pt")``. Files are read with
 ``torch.load(weights_only=True)``; torch is imported only when a learned agent is made.
 
-The policy acts greedily (its most likely behavior). A checkpoint records the observation it was
+The policy acts greedily: a behavior policy takes its most likely *feasible* behavior (``info["action_mask"]``,
+a lane change needs a lane on that side). The env would run an infeasible choice as ``keep``, which keeps the
+current speed: at standstill that is a trap a deterministic policy never leaves (measured: the DAgger ``il``
+asked change_right on a one-lane road 173 times in a row at 0 m/s in Town03 Straight, hbmp suite episode 0, and
+timed out; the expert, whose data it learnt, never changes lanes at standstill). A checkpoint records the
+observation it was
 trained on (``env_kwargs``): evaluate a vehicle-centric policy on an env made with
 ``observation="vehicle_centric"``.
 """
@@ -22,7 +27,8 @@ import numpy as np
 from hbmp_bench.agents.base import register_agent
 
 TRAIN_COMMANDS = {
-    "il": "hbmp-bench train il --episodes 150 --workers 2 --seed 0 --density regular --out runs/il",
+    "il": "hbmp-bench train il --fidelity continuous --road-profile metric --episodes 2000 --workers 2 --seed 0 "
+          "--density regular --out runs/il",
     "hbmp": "hbmp-bench train hbmp --episodes 6000 --workers 2 --seed 0 --density regular --out runs/hbmp",
     "hbmp-s": "hbmp-bench train hbmp-s --episodes 6000 --workers 2 --seed 0 --density regular --out runs/hbmp-s",
     "flat": "hbmp-bench train flat --episodes 6000 --workers 2 --seed 0 --density regular --out runs/flat",
@@ -103,10 +109,12 @@ class LearnedAgent:
 
     def act(self, observation: dict[str, Any], info: dict[str, Any]):
         """The behavior index (int) for behavior policies; the control vector (np.ndarray) for ``flat``."""
+        if self.discrete:
+            probabilities = self.behavior_probabilities(observation, info)
+            mask = np.asarray(info.get("action_mask", np.ones_like(probabilities)), dtype=bool)
+            return int(np.argmax(np.where(mask, probabilities, -1.0)) if mask.any() else np.argmax(probabilities))
         with self._torch.inference_mode():
             out = self.actor(self._batch(observation, info))[0]
-        if self.discrete:
-            return int(out.item())
         # the Gaussian mean is unbounded; training clips controls to [-1, 1] in the env, so does this
         return np.clip(out.cpu().numpy(), -1.0, 1.0).astype(np.float32)
 

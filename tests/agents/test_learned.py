@@ -16,13 +16,13 @@ SHAPES = {"occupancy": [1, 64, 36], "road": [10], "action_mask": [5]}
 GROUPS = {"actor": ["occupancy", "road"], "critic": ["occupancy", "road"]}
 
 
-def _tiny_checkpoint(path, kind="hbmp", mask=False):
+def _tiny_checkpoint(path, kind="hbmp", mask=False, logits=(0.0, 5.0, 0.0, 0.0, 0.0)):
     actor_cfg, critic_cfg = behavior_model_cfgs(mask_actions=mask)
     actor = build_model(actor_cfg, {k: tuple(v) for k, v in SHAPES.items()}, GROUPS, "actor", 1)
-    with torch.no_grad():  # make the policy always answer speed_down (1)
+    with torch.no_grad():  # make the policy always answer with these logits (default: speed_down, 1)
         last = [m for m in actor.mlp.modules() if isinstance(m, torch.nn.Linear)][-1]
         last.weight.zero_()
-        last.bias.copy_(torch.tensor([0.0, 5.0, 0.0, 0.0, 0.0]))
+        last.bias.copy_(torch.tensor(logits))
     save_checkpoint(str(path), {
         "kind": kind,
         "model": {"actor": actor_cfg, "critic": critic_cfg, "obs_shapes": SHAPES, "obs_groups": GROUPS,
@@ -53,6 +53,15 @@ def test_checkpoint_path_loads_with_weights_only_and_acts(tmp_path):
     assert agent.act(_obs(), {"action_mask": [1, 1, 1, 1, 1]}) == 1
     probs = agent.behavior_probabilities(_obs(), {})
     assert probs.shape == (5,) and probs.sum() == pytest.approx(1.0) and probs.argmax() == 1
+
+
+def test_unmasked_policy_takes_its_best_feasible_behavior(tmp_path):
+    """An infeasible choice would run as keep (a standstill trap); the agent takes the best feasible one."""
+    agent = load_agent(_tiny_checkpoint(tmp_path / "mine.pt", logits=(0.0, 5.0, 1.0, 3.0, 2.0)))
+    assert agent.act(_obs(), {"action_mask": [1, 0, 1, 1, 1]}) == 3
+    assert agent.act(_obs(), {"action_mask": [1, 0, 1, 0, 1]}) == 4
+    assert agent.act(_obs(), {}) == 1, "no mask given: every behavior is feasible"
+    assert agent.act(_obs(), {"action_mask": [0, 0, 0, 0, 0]}) == 1, "an all-zero mask masks nothing"
 
 
 def test_masked_policy_reads_the_mask_from_info(tmp_path):
