@@ -78,8 +78,8 @@ class CsvLog:
 def _fmt(value: Any) -> Any:
     if isinstance(value, (bool, np.bool_)):
         return int(value)
-    if isinstance(value, float):
-        return round(value, 4)
+    if isinstance(value, float):  # 4 decimals; small rates (1e-5) keep 4 significant digits
+        return round(value, 4) if value == 0 or abs(value) >= 1e-3 else float(f"{value:.4g}")
     return value
 
 
