@@ -110,7 +110,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if args.ppo:  # bad names and values fail before any worker starts
         from hbmp_bench.training.ppo import PPOConfig
 
-        if PPOConfig.parse_assignments(args.ppo).get("anchor_coef", 0) > 0 and init is None:
+        if PPOConfig(**PPOConfig.parse_assignments(args.ppo)).anchor_coef > 0 and init is None:
             raise ValueError("--ppo anchor_coef needs an --init actor to anchor to")
     source = (args.resume, RUN_OPTIONS) if args.resume else (init, INPUT_OPTIONS) if init else None
     for name, value in (recorded_env_options(*source) if source else {}).items():

@@ -12,9 +12,11 @@ Deviations from the paper, and why:
   ``desired_kl`` the actor's rate follows rsl-rl's adaptive rule (÷1.5 when the mini-batch KL to the
   roll-out policy exceeds 2 × desired, ×1.5 below ½ × desired), the critic's stays at ``LR_c``
   (rsl-rl's own schedule would set both groups to one rate).
-- IL anchor (not in the paper; ``anchor_coef``, default 0): the loss gains
-  ``anchor_coef · KL(π_IL(·|s) ‖ π(·|s))`` over the mini-batch's states, π_IL the frozen ``--init``
-  actor. Why: from a peaked IL policy, PPO's ratio clip is lopsided in probability space. A behavior
+- IL anchor (not in the paper; ``anchor_coef``, default 0): the loss gains ``anchor_coef`` times a KL
+  between the policy and π_IL, the frozen ``--init`` actor, over the mini-batch's states:
+  ``anchor_kl="forward"``: KL(π_IL ‖ π), mass-covering (π must keep probability wherever π_IL has some,
+  so it cannot sharpen); ``"reverse"``: KL(π ‖ π_IL), mode-seeking (π may concentrate on π_IL's likely
+  behaviors, but pays for mass where π_IL has little). Why: from a peaked IL policy, PPO's ratio clip is lopsided in probability space. A behavior
   the IL policy picks with p = 0.95 can lose up to 20 % of it after one failed episode
   (0.95 → 0.76) but gain at most 5 % after a success, so advantage noise alone (1-2 episodes per
   iteration, a ±100 terminal reward) flattens the policy: measured, the entropy rose 0.33 → 0.42 and
@@ -66,6 +68,7 @@ from hbmp_bench.training.runlog import EPISODE_COLUMNS, ITERATION_COLUMNS, CsvLo
 from hbmp_bench.training.worker import WorkerEnvConfig
 
 MASK_GROUP = "action_mask"
+ANCHOR_KL = ("forward", "reverse")
 
 
 class TwoRatePPO(PPO):
@@ -77,7 +80,9 @@ class TwoRatePPO(PPO):
             value when ``desired_kl`` is given.
         critic_learning_rate: Adam learning rate of the critic's parameters (paper: 5e-4).
         desired_kl: None (fixed actor rate) or the target KL per mini-batch of the adaptive actor rate.
-        anchor_coef: weight of KL(π_anchor ‖ π) in the loss; the anchor is set by :meth:`set_anchor`.
+        anchor_coef: weight of the KL between π and π_anchor in the loss; the anchor is set by
+            :meth:`set_anchor`.
+        anchor_kl: ``forward`` (KL(π_anchor ‖ π)) or ``reverse`` (KL(π ‖ π_anchor)).
         schedule: must be ``fixed`` (the adaptive rule here is the actor's only: ``desired_kl``).
         other arguments: as ``rsl_rl.algorithms.PPO``.
     """
@@ -86,7 +91,8 @@ class TwoRatePPO(PPO):
     """Range of the adaptive actor rate [1/step] (rsl-rl's is 1e-5..1e-2, for from-scratch locomotion)."""
 
     def __init__(self, actor, critic, storage, actor_learning_rate: float = 1e-4, critic_learning_rate: float = 5e-4,
-                 desired_kl: float | None = None, anchor_coef: float = 0.0, optimizer: str = "adam",
+                 desired_kl: float | None = None, anchor_coef: float = 0.0, anchor_kl: str = "forward",
+                 optimizer: str = "adam",
                  schedule: str = "fixed", **kwargs: Any) -> None:
         if schedule != "fixed":
             raise ValueError("TwoRatePPO's adaptive rate is the actor's only: give desired_kl, keep schedule 'fixed'")
@@ -97,6 +103,7 @@ class TwoRatePPO(PPO):
         self.actor_learning_rate = actor_learning_rate
         self.actor_desired_kl = desired_kl
         self.anchor_coef = anchor_coef
+        self.anchor_kl = anchor_kl
         self.anchor = None
         self.optimizer = resolve_optimizer(optimizer)([
             {"params": list(self.actor.parameters()), "lr": actor_learning_rate},
@@ -161,7 +168,8 @@ class TwoRatePPO(PPO):
                 with torch.no_grad():
                     self.anchor(batch.observations, masks=batch.masks, stochastic_output=True)
                     anchor_params = tuple(p.detach() for p in self.anchor.output_distribution_params)
-                kl_init = self.actor.get_kl_divergence(anchor_params, params).mean()
+                kl_init = (self.actor.get_kl_divergence(anchor_params, params) if self.anchor_kl == "forward"
+                           else self.actor.get_kl_divergence(params, anchor_params)).mean()
                 if self.anchor_coef > 0:
                     loss = loss + self.anchor_coef * kl_init
                 sums["kl_init"] += kl_init.item()
@@ -202,6 +210,7 @@ class PPOConfig:
             learns (the actor's learning rate is 0); see the module notes.
         desired_kl: None (fixed LR_a) or the per-mini-batch KL the adaptive actor rate aims at.
         anchor_coef: weight of the KL to the ``--init`` actor in the loss (0: none); see the module notes.
+        anchor_kl: direction of that KL: ``forward`` KL(π_IL ‖ π) or ``reverse`` KL(π ‖ π_IL).
     """
 
     actor_learning_rate: float = 1e-4
@@ -221,8 +230,11 @@ class PPOConfig:
     critic_warmup_episodes: int = 0
     desired_kl: float | None = None
     anchor_coef: float = 0.0
+    anchor_kl: str = "forward"
 
     def __post_init__(self):
+        if self.anchor_kl not in ANCHOR_KL:
+            raise ValueError(f"anchor_kl must be one of {', '.join(ANCHOR_KL)}, got {self.anchor_kl!r}")
         for name in ("actor_learning_rate", "critic_learning_rate", "clip_param", "reward_scale", "init_std"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
@@ -253,6 +265,8 @@ class PPOConfig:
             default = fields[name].default
             if value.lower() == "none" and default is None:
                 parsed[name] = None
+            elif isinstance(default, str):
+                parsed[name] = value
             elif isinstance(default, bool):
                 if value.lower() not in ("true", "false", "1", "0"):
                     raise ValueError(f"--ppo {name} takes true or false, got {value!r}")
@@ -296,6 +310,7 @@ class PPOConfig:
                 "schedule": "fixed",
                 "desired_kl": self.desired_kl,
                 "anchor_coef": self.anchor_coef,
+                "anchor_kl": self.anchor_kl,
             },
             "actor": dict(actor),
             "critic": dict(critic),

@@ -21,8 +21,9 @@ DAGGER_COLUMNS = ("beta", "expert_share")
 ITERATION_COLUMNS = ("iteration", "episode", "decisions", "actor_frozen", "value", "surrogate", "entropy", "wall_s",
                      "kl_init", "actor_lr")
 """PPO's ``iterations.csv``: after each rsl-rl iteration, the episodes finished by its end, the losses
-(mean over the update's mini-batches), whether the actor was frozen (critic warm-up), the mean KL from the
-initial (IL) actor to the current one (empty without an initial actor) and the actor's learning rate."""
+(mean over the update's mini-batches), whether the actor was frozen (critic warm-up), the mean KL between the
+initial (IL) actor and the current one in the run's ``anchor_kl`` direction (empty without an initial actor) and
+the actor's learning rate."""
 ROUND_COLUMNS = ("round", "episodes", "dataset", "holdout", "loss", "train_agreement", "holdout_agreement", "wall_s")
 
 

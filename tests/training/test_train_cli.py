@@ -70,13 +70,14 @@ def test_hbmp_from_il_warms_up_the_critic_learns_and_resumes(il_run, tmp_path):
     il_policy = os.path.join(il_run, "policy.pt")
     assert main(["train", "hbmp", "--episodes", "2", "--workers", "1", "--out", out, "--init", il_policy,
                  "--critic-warmup", "2", "--ppo", "entropy_coef=0.002", "--ppo", "anchor_coef=0.5",
-                 "--ppo", "desired_kl=0.01", *COMMON]) == 0
+                 "--ppo", "desired_kl=0.01", "--ppo", "anchor_kl=reverse", *COMMON]) == 0
     _files_of_a_run(out, 2)
     first = torch.load(os.path.join(out, "checkpoint.pt"), weights_only=True)
     il = torch.load(il_policy, weights_only=True)
     assert first["kind"] == "hbmp" and first["train"]["reward"] == "dense" and first["train"]["init"] == il_policy
     assert first["train"]["ppo.critic_warmup_episodes"] == 2 and first["train"]["ppo.entropy_coef"] == 0.002
     assert first["train"]["ppo.anchor_coef"] == 0.5 and first["train"]["ppo.desired_kl"] == 0.01
+    assert first["train"]["ppo.anchor_kl"] == "reverse"
     assert "--ppo entropy_coef=0.002 --ppo anchor_coef=0.5" in open(os.path.join(out, "MODEL_CARD.md")).read()
     assert all(torch.equal(il["actor_state_dict"][k], v) for k, v in first["anchor_state_dict"].items()), \
         "the anchor is the --init actor, kept in the checkpoint for a resume"
@@ -136,6 +137,8 @@ def test_clear_errors(il_run, tmp_path, capsys):
     assert "entropy_coef" in capsys.readouterr().err and not os.path.exists(tmp_path / "x")
     assert main(["train", "hbmp", "--ppo", "anchor_coef=lots", "--out", str(tmp_path / "x"), *COMMON]) == 2
     assert "number" in capsys.readouterr().err
+    assert main(["train", "hbmp", "--ppo", "anchor_kl=sideways", "--out", str(tmp_path / "x"), *COMMON]) == 2
+    assert "forward, reverse" in capsys.readouterr().err and not os.path.exists(tmp_path / "x")
     assert main(["train", "hbmp", "--ppo", "anchor_coef=1", "--init", "none", "--out", str(tmp_path / "x"),
                  *COMMON]) == 2
     assert "--init" in capsys.readouterr().err
