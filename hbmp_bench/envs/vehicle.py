@@ -36,7 +36,7 @@ from hbmp_bench.envs.privileged import LIGHTS_RANGE_M, PrivilegedScene
 from hbmp_bench.envs.scene import Scene
 from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents, StopLine
-from hbmp_bench.metrics.episode import EpisodeScorer, events_reward
+from hbmp_bench.metrics.episode import GOAL_UNREACHABLE, EpisodeScorer, events_reward
 from hbmp_bench.metrics.geometry import LaneLocator, stop_line_of
 from hbmp_bench.planning.behaviors import BEHAVIORS, Behavior
 from hbmp_bench.scenarios import Episode
@@ -203,7 +203,7 @@ class ControlledVehicle:
         """(observation, reward, info) after ``events``: r_T pays ``events``; r_k (dense reward)
         is paid only when the behavior has ended."""
         obs, info = self.observe(events)
-        r_terminal = events_reward(events, timed_out=self.end_reason == "timeout")
+        r_terminal = events_reward(events, timed_out=self.end_reason in GOAL_UNREACHABLE)
         r_k = self.driver.behavior_reward() if behavior_ended else 0.0
         if behavior_ended:
             info["behavior"] = BEHAVIORS[self.behavior]

@@ -21,7 +21,13 @@ TERMINAL_REWARD = {
     "off_road": -1.0,
 }
 """The paper's r_T: +100 goal, −50 collision or overtime, −10 red light, −1 wrong lane (off-road
-is counted like a wrong lane). Each event pays once, when it happens."""
+is counted like a wrong lane). Each event pays once, when it happens. An episode that ends because the
+car left the network before its goal (its route ended in a lane other than the goal's, or it drove off the
+map) can no longer reach the goal: it pays the overtime's −50 (``GOAL_UNREACHABLE``; the paper has no such
+terminal state, and paying nothing would make it the cheapest way to end a training episode)."""
+
+GOAL_UNREACHABLE = ("timeout", "left_network")
+"""End reasons that pay ``TERMINAL_REWARD["timeout"]``: the goal can no longer be reached."""
 
 PROGRESS_SLACK_M = 5.0
 """A progress reading more than this beyond the route's length is a mismatch, not progress [m]."""

@@ -7,6 +7,7 @@ import hbmp_bench  # noqa: F401  (registers the ids)
 from hbmp_bench.agents import agent_env_kwargs, load_agent
 from hbmp_bench.envs import env_ids, make
 from hbmp_bench.errors import UnknownNameError
+from hbmp_bench.metrics.episode import TERMINAL_REWARD
 
 
 @pytest.mark.slow
@@ -125,3 +126,17 @@ def test_occupancy_marks_background_vehicles():
             break
     env.close()
     assert seen > 0
+
+
+def test_leaving_the_network_before_the_goal_pays_the_overtime_penalty():
+    """Ending off the network (route end in another lane than the goal's, or off the map) is a failure, not a
+    free way out: r_T is the overtime's -50, as a timeout's."""
+    env = gym.make("hbmp_bench/Town01-Straight-v0", episode_index=0, fidelity="event").unwrapped
+    env.reset(seed=0)
+    env.step(0)
+    env.world.ego.driver.off_map = True  # what the driver reports when SUMO cannot place the car
+    _, reward, terminated, truncated, info = env.step(0)
+    env.close()
+    assert terminated and not truncated and info["episode"]["end_reason"] == "left_network"
+    assert info["reward_components"]["r_T"] == TERMINAL_REWARD["timeout"] == -50.0
+    assert not info["episode"]["success"]
