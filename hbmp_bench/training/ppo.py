@@ -16,8 +16,9 @@ Deviations from the paper, and why:
   between the policy and π_IL, the frozen ``--init`` actor, over the mini-batch's states:
   ``anchor_kl="forward"``: KL(π_IL ‖ π), mass-covering (π must keep probability wherever π_IL has some,
   so it cannot sharpen); ``"reverse"``: KL(π ‖ π_IL), mode-seeking (π may concentrate on π_IL's likely
-  behaviors, but pays for mass where π_IL has little). Why: from a peaked IL policy, PPO's ratio clip is lopsided in probability space. A behavior
-  the IL policy picks with p = 0.95 can lose up to 20 % of it after one failed episode
+  behaviors, but pays for mass where π_IL has little). Why: from a peaked IL policy, PPO's ratio clip
+  is lopsided in probability space. A behavior the IL policy picks with p = 0.95 can lose up to 20 %
+  of it after one failed episode
   (0.95 → 0.76) but gain at most 5 % after a success, so advantage noise alone (1-2 episodes per
   iteration, a ±100 terminal reward) flattens the policy: measured, the entropy rose 0.33 → 0.42 and
   training success fell 49 → 29 % over 200 episodes with the paper's settings
@@ -26,7 +27,8 @@ Deviations from the paper, and why:
 - Batch size 32 is the mini-batch: each iteration collects ``num_steps_per_env`` decisions in
   each worker and splits them into mini-batches of 32.
 - Not given in the paper, rsl-rl's defaults kept: GAE λ = 0.95, 5 epochs per iteration, entropy
-  coefficient 0.01; any of them can be set with ``train --ppo NAME=VALUE``, value-loss coefficient 1, gradient-norm clip 1, clipped value loss.
+  coefficient 0.01, value-loss coefficient 1, gradient-norm clip 1, clipped value loss. Any field of
+  :class:`PPOConfig` can be set with ``train --ppo NAME=VALUE``.
 - Rewards are scaled by ``reward_scale`` = 0.01 for learning (r_T is ±100 / −50, which the
   clipped value loss would follow only slowly); advantages are normalised, so the policy
   gradient does not depend on the scale. Logs keep the unscaled rewards.
