@@ -184,6 +184,8 @@ class RoadNetwork:
                         )
                     )
             self.connections[edge_id] = tuple(conns)
+        self._link_end = {c.via: c.to_lane for conns in self.connections.values() for c in conns if c.via}
+        """The lane a link leads onto, by the link's first junction lane."""
         self.lane_next: dict[str, tuple[tuple[str, str], ...]] = {}
         for lane_id in list(self.lanes) + list(self.internal_lanes):
             nxt = []
@@ -355,16 +357,28 @@ class RoadNetwork:
         pos = ids.index(lane_id) + side
         return ids[pos] if 0 <= pos < len(ids) else None
 
-    def follow(self, lane_id: str, next_edge: str | None) -> str | None:
+    def follow(self, lane_id: str, next_edge: str | None, into: frozenset[str] = frozenset()) -> str | None:
         """The lane after ``lane_id`` on the way to ``next_edge`` (internal lanes included).
 
-        Falls back to the first successor when no link leads to ``next_edge``; None at a dead end.
+        Where several links of ``lane_id`` lead onto ``next_edge`` (a lane that fans out), the one
+        landing fewest lane changes from the lanes ``into`` (lanes of ``next_edge``: the route's
+        lanes there, :meth:`route_lanes`), the first of those; without ``into``, the first. Falls
+        back to the first successor when no link leads to ``next_edge``; None at a dead end.
         """
         options = self.lane_next.get(lane_id, ())
-        for step, edge in options:
-            if edge == next_edge:
-                return step
+        steps = [step for step, edge in options if edge == next_edge]
+        if len(steps) > 1 and into:
+            return min(steps, key=lambda step: self.changes_into(self._link_end.get(step, step), into))
+        if steps:
+            return steps[0]
         return options[0][0] if options else None
+
+    def changes_into(self, lane_id: str, into: frozenset[str] | None) -> int:
+        """Lane changes from ``lane_id`` to the nearest lane of ``into`` on its edge (0 without ``into``)."""
+        lane = self.lanes.get(lane_id)
+        if lane is None:
+            return len(self.lanes)
+        return min((abs(self.lanes[t].index - lane.index) for t in into or () if t in self.lanes), default=0)
 
     def rightmost_lane(self, edge: str) -> str:
         """The rightmost drivable lane of ``edge``."""
