@@ -329,6 +329,22 @@ class RoadNetwork:
         """
         return self._route_lanes(tuple(route), goal_lane, goal_pos, float(change_m), float(change_s), float(cutoff_m))
 
+    def reachable_goal_lanes(self, route: tuple[str, ...], goal_pos: float, start_lane: str, start_pos: float,
+                             change_m: float = 20.0, change_s: float = 3.0) -> tuple[str, ...]:
+        """Lanes of the route's last edge (rightmost first) a car can be in at ``goal_pos`` [m]: within as
+        many lane changes of a lane the last link lands on (of the start lane, for a one-edge route) as the
+        ``goal_pos`` [m] of room allows, one change taking ``max(change_m, change_s * speed limit)`` [m] as
+        in :meth:`route_lanes` (from the start, ``change_m``: the car starts slowly)."""
+        goal_edge = route[-1]
+        if len(route) == 1:
+            entries, room, per_change = [start_lane], goal_pos - start_pos, change_m
+        else:
+            entries = [c.to_lane for c in self.links(route[-2], goal_edge)]
+            room, per_change = goal_pos, max(change_m, change_s * self.lanes[self.edge_lanes[goal_edge][0]].speed)
+        return tuple(lane for lane in self.edge_lanes[goal_edge]
+                     if min(abs(self.lanes[lane].index - self.lanes[e].index) for e in entries) * per_change
+                     <= max(room, 0.0)) or tuple(entries[:1])
+
     @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
     def _route_lanes(self, route: tuple[str, ...], goal_lane: str, goal_pos: float | None, change_m: float,
                      change_s: float, cutoff_m: float) -> tuple[frozenset[str], ...]:
