@@ -88,7 +88,7 @@ class ControlEnv(gym.Env):
         super().reset(seed=seed)
         obs, infos = self.parallel.reset(seed=seed, options=options)
         driver, ego = self.world.ego_driver, self.world.ego
-        driver.path = driver.lane_path(ego.followed_lane, ego.next_edges())
+        driver.path = driver.lane_path(ego.followed_lane, ego.next_edges(), ego.next_lanes())
         return self._extend(obs[EGO_ID]), infos[EGO_ID]
 
     def step(self, action):

@@ -2,7 +2,7 @@
 
 A driver executes one behavior at a time for one vehicle; the world steps SUMO around it::
 
-    executed = driver.begin(behavior, state, lane, next_edges)   # behavior actually run (infeasible -> keep)
+    executed = driver.begin(behavior, state, lane, next_edges, into)   # behavior actually run (infeasible -> keep)
     while driver.before_step(others):                       # others: sim.Actors; False once finished
         sim.step()
         state = driver.observe(sim_state)                   # pose the detectors and M_t use
@@ -98,8 +98,10 @@ class EventDriver:
     def reset(self, state: VehicleState) -> None:
         self._left = 0
 
-    def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...]) -> int:
-        """Start ``behavior``; ``lane`` is the lane followed (SUMO's own lane in event fidelity)."""
+    def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...],
+              into: tuple[frozenset[str], ...] = ()) -> int:
+        """Start ``behavior``; ``lane`` is the lane followed (SUMO's own lane in event fidelity); SUMO
+        picks the links the vehicle takes (``into`` is not used)."""
         executed = behavior if feasible_behaviors(self.net, state.lane, state.lane_pos)[behavior] else Behavior.KEEP
         limit = self.net.lane(state.lane).speed
         self.sim.set_speed(self.vehicle_id, reference_speed(executed, state.speed, limit, self.behavior_config))
@@ -136,12 +138,14 @@ class ModelDriver:
         self.off_map = False
         """The model's pose is too far from the route for SUMO to place the vehicle there."""
         self._path = functools.lru_cache(maxsize=512)(
-            lambda lane, nxt: followed_path(net, lane, nxt, config.lane_back_m, config.lane_ahead_m,
-                                            max_spacing=1.0, round_corners=3))
+            lambda lane, nxt, into: followed_path(net, lane, nxt, config.lane_back_m, config.lane_ahead_m,
+                                                  max_spacing=1.0, round_corners=3, into=into))
 
-    def lane_path(self, lane_id: str, next_edges: tuple[str, ...]):
-        """The (rounded, densified) centreline of ``lane_id`` continued along ``next_edges``; cached."""
-        return self._path(lane_id, tuple(next_edges))
+    def lane_path(self, lane_id: str, next_edges: tuple[str, ...], into: tuple[frozenset[str], ...] = ()):
+        """The (rounded, densified) centreline of ``lane_id`` continued along ``next_edges``, through
+        each junction by the link into the route's lanes ``into`` (per next edge, see
+        :func:`~hbmp_bench.envs.observation.followed_path`); cached."""
+        return self._path(lane_id, tuple(next_edges), tuple(into))
 
     def reset(self, state: VehicleState) -> None:
         """Take the vehicle's pose from SUMO at the start of an episode (speed kept, steering centred)."""
@@ -187,18 +191,22 @@ class ContinuousDriver(ModelDriver):
         self.executor = BehaviorExecutor(planner=planner, config=config.executor, behavior_cfg=behavior,
                                          vehicle=config.vehicle)
 
-    def reference_paths(self, lane_id: str, next_edges: tuple[str, ...]) -> ReferencePaths:
-        """Centrelines of the left, current and right lane, each continued along the route."""
+    def reference_paths(self, lane_id: str, next_edges: tuple[str, ...],
+                        into: tuple[frozenset[str], ...] = ()) -> ReferencePaths:
+        """Centrelines of the left, current and right lane, each continued along the route (into its
+        lanes ``into``: :meth:`lane_path`)."""
         sides = [self.net.neighbour_lane(lane_id, side) for side in (+1, -1)]
-        left, right = (None if lane is None else self.lane_path(lane, next_edges) for lane in sides)
-        return ReferencePaths(left, self.lane_path(lane_id, next_edges), right)
+        left, right = (None if lane is None else self.lane_path(lane, next_edges, into) for lane in sides)
+        return ReferencePaths(left, self.lane_path(lane_id, next_edges, into), right)
 
-    def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...]) -> int:
-        """Start ``behavior`` on the centreline of ``lane`` continued along ``next_edges`` (in a
-        junction: the lane before it, so the path runs through the route's own connection)."""
+    def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...],
+              into: tuple[frozenset[str], ...] = ()) -> int:
+        """Start ``behavior`` on the centreline of ``lane`` continued along ``next_edges`` into the
+        route's lanes ``into`` (in a junction: the lane before it, so the path runs through the
+        route's own connection)."""
         if not feasible_behaviors(self.net, state.lane, state.lane_pos)[behavior]:
             behavior = Behavior.KEEP
-        refs = self.reference_paths(lane, tuple(next_edges))
+        refs = self.reference_paths(lane, tuple(next_edges), tuple(into))
         limit = self.net.lane(lane).speed
         return int(self.executor.start(behavior, self.model, refs, limit))
 
@@ -254,8 +262,9 @@ class ControlDriver(ModelDriver):
         accel, steer = (float(np.clip(a, -1.0, 1.0)) for a in action)
         self._control = Control(steer=steer, throttle=max(accel, 0.0), brake=max(-accel, 0.0))
 
-    def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...]) -> int:
-        self.path = self.lane_path(lane, next_edges)
+    def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...],
+              into: tuple[frozenset[str], ...] = ()) -> int:
+        self.path = self.lane_path(lane, next_edges, into)
         self._left = 1
         return Behavior.KEEP
 

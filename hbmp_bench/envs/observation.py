@@ -146,11 +146,14 @@ def _sample_boxes(xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np
 
 
 def followed_path(net: RoadNetwork, lane_id: str, next_edges: tuple[str, ...], back_m: float, ahead_m: float,
-                  max_spacing: float | None = None, round_corners: int = 0, via: str = "") -> Path:
+                  max_spacing: float | None = None, round_corners: int = 0, via: str = "",
+                  into: tuple[frozenset[str], ...] = ()) -> Path:
     """The centreline the ego follows: ``lane_id`` extended straight back by ``back_m`` [m] and ahead
     by at least ``ahead_m`` [m] along the lanes that lead to the route's ``next_edges``, through
-    junctions (the paper's "virtual lanes"); straight on past a dead end. ``via``: the junction lane
-    to leave ``lane_id`` by where several links lead onto the next edge (default: the first). ``max_spacing`` [m]
+    junctions (the paper's "virtual lanes"); straight on past a dead end. Where a lane has several
+    links onto the next edge, the one into the route's lanes there: ``into[k]``, the lanes of
+    ``next_edges[k]`` to reach (``RoadNetwork.follow``; none given: the first link); ``via``: the
+    junction lane to leave ``lane_id`` by, overriding that choice. ``max_spacing`` [m]
     densifies the polyline and ``round_corners`` passes of corner cutting round SUMO's coarse
     vertices (:func:`hbmp_bench.planning.round_corners`, after merging the vertices closer than
     ``CORNER_MIN_SPACING_M``), which the motion planner needs; the defaults keep SUMO's vertices
@@ -161,7 +164,7 @@ def followed_path(net: RoadNetwork, lane_id: str, next_edges: tuple[str, ...], b
     pieces = [shape[0] + back * back_m, shape]
     lane, beyond, k = lane_id, 0.0, 0
     while beyond < ahead_m:
-        nxt = net.follow(lane, next_edges[k] if k < len(next_edges) else None)
+        nxt = net.follow(lane, next_edges[k] if k < len(next_edges) else None, into[k] if k < len(into) else frozenset())
         if lane == lane_id and via and any(step == via for step, _ in net.lane_next.get(lane, ())):
             nxt = via
         if nxt is None:
@@ -186,13 +189,15 @@ class ObservationBuilder:
         self._path = functools.lru_cache(maxsize=256)(self._followed_path)
 
     # ------------------------------------------------------------------ M_t
-    def _followed_path(self, lane_id: str, next_edges: tuple[str, ...]) -> Path:
-        return followed_path(self.net, lane_id, next_edges, self.config.back_m, self.config.ahead_m)
+    def _followed_path(self, lane_id: str, next_edges: tuple[str, ...], into: tuple[frozenset[str], ...]) -> Path:
+        return followed_path(self.net, lane_id, next_edges, self.config.back_m, self.config.ahead_m, into=into)
 
     def occupancy(self, ego_xy: np.ndarray, ego_yaw: float, lane_id: str, next_edges: tuple[str, ...],
-                  xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np.ndarray) -> np.ndarray:
-        """M_t (1, rows, cols) float32 from the other actors (K,) arrays."""
-        path = self._path(lane_id, next_edges) if self.config.kind == "deformed" and len(xy) else None
+                  xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np.ndarray,
+                  into: tuple[frozenset[str], ...] = ()) -> np.ndarray:
+        """M_t (1, rows, cols) float32 from the other actors (K,) arrays, deformed along the lane
+        ``lane_id`` continued onto ``next_edges`` (into the lanes ``into``: :func:`followed_path`)."""
+        path = self._path(lane_id, tuple(next_edges), tuple(into)) if self.config.kind == "deformed" and len(xy) else None
         return occupancy_grid(self.config, ego_xy, ego_yaw, path, xy, yaw, length, width)
 
 

@@ -174,18 +174,19 @@ class PrivilegedScene:
         self.net, self.sim, self.vehicle_id, self.vtype = net, sim, vehicle_id, vtype
         self.fidelity, self.lane_path = fidelity, lane_path
         self._path = functools.lru_cache(maxsize=256)(
-            lambda lane, nxt, via: followed_path(net, lane, nxt, 10.0, LEADER_RANGE_M + 20.0, via=via))
+            lambda lane, nxt, via, into: followed_path(net, lane, nxt, 10.0, LEADER_RANGE_M + 20.0, via=via, into=into))
 
     def fields(self, ego: VehicleState, followed_lane: str, next_edges: tuple[str, ...], actors: Actors,
-               lights: list[LightAhead], junction_exit_m: float) -> dict:
-        """The fields for the vehicle ``ego`` following ``followed_lane`` onto ``next_edges``, among
-        ``actors``; the world measures along its route the ``lights`` ahead (nearest first) and
-        ``junction_exit_m``."""
+               lights: list[LightAhead], junction_exit_m: float, into: tuple[frozenset[str], ...] = ()) -> dict:
+        """The fields for the vehicle ``ego`` following ``followed_lane`` onto ``next_edges`` (into
+        the route's lanes ``into`` there, see :func:`followed_path`), among ``actors``; the world
+        measures along its route the ``lights`` ahead (nearest first) and ``junction_exit_m``."""
         lane = followed_lane or ego.lane
-        link, entry = self._link_ahead(ego, followed_lane, next_edges)
+        into = tuple(into)
+        link, entry = self._link_ahead(ego, followed_lane, next_edges, into)
         crossings = () if link is None else self._crossings(link, entry, actors)
         held = {p for c, waiting in crossings if c["signal"] and c["signal"] in RED + YELLOW for p in waiting}
-        out = path_actors(self._path(lane, tuple(next_edges[:3]), link.via if link is not None else ""), ego.xy,
+        out = path_actors(self._path(lane, tuple(next_edges[:3]), link.via if link is not None else "", into[:3]), ego.xy,
                           self.vtype.length, self.vtype.width, actors.xy, actors.yaw, actors.speed, actors.length,
                           actors.width, actors.is_pedestrian, np.isin(actors.ids, list(held)) if held else None)
         out["lights_ahead"] = tuple((float(light.distance), light.state,
@@ -196,24 +197,29 @@ class PrivilegedScene:
         out["crossings"] = tuple(c for c, _ in crossings)
         out["fidelity"] = self.fidelity
         if self.lane_path is not None:
-            out.update(self._lane_tracking(ego, lane, next_edges))
+            out.update(self._lane_tracking(ego, lane, next_edges, into))
         return out
 
     def _front(self, ego: VehicleState) -> np.ndarray:
         return ego.xy + self.vtype.length / 2 * np.array([np.cos(ego.yaw), np.sin(ego.yaw)])
 
-    def _link_ahead(self, ego: VehicleState, followed_lane: str, next_edges: tuple[str, ...]) -> tuple[Connection | None, float]:
+    def _link_ahead(self, ego: VehicleState, followed_lane: str, next_edges: tuple[str, ...],
+                    into: tuple[frozenset[str], ...] = ()) -> tuple[Connection | None, float]:
         """The link from the followed lane onto the route's next edge (the junction ahead, or the
         one the vehicle is in) and the distance from the front bumper to its start [m] (negative
         inside); (None, nan) where there is none. Where several links lead there, in event
         fidelity the one SUMO drives the vehicle over (the one it is on, or the one it approaches);
-        with the motion planner the first, the one its centreline follows."""
+        with the motion planner the one its centreline follows (into the route's lanes ``into``:
+        ``RoadNetwork.follow``)."""
         if followed_lane not in self.net.lanes:
             return None, float("nan")
         lane = self.net.lane(followed_lane)
         nxt = next_edges[0] if next_edges else None
         links = [c for c in self.net.connections[lane.edge] if c.from_lane == followed_lane and c.to_edge == nxt]
         link = links[0] if links else None
+        if len(links) > 1 and self.lane_path is not None:
+            step = self.net.follow(followed_lane, nxt, into[0] if into else frozenset())
+            link = next((c for c in links if (c.via or c.to_lane) == step), link)
         if len(links) > 1 and self.lane_path is None:
             on = ego.lane if ego.lane in self.net.internal_lanes else self.sim.next_junction_lane(self.vehicle_id)
             link = next((c for c in links if c.via == on or on in self.net.link_lanes(c)), link)
@@ -246,8 +252,9 @@ class PrivilegedScene:
                          "waiting_m": tuple(sorted(waiting))}, ids))
         return tuple(out)
 
-    def _lane_tracking(self, ego: VehicleState, lane: str, next_edges: tuple[str, ...]) -> dict:
-        path = self.lane_path(lane, tuple(next_edges))
+    def _lane_tracking(self, ego: VehicleState, lane: str, next_edges: tuple[str, ...],
+                       into: tuple[frozenset[str], ...] = ()) -> dict:
+        path = self.lane_path(lane, tuple(next_edges), into)
         s, e, theta, _ = path.project(ego.xy, ego.yaw)
         ahead = np.arange(s, s + max(3.0 * ego.speed, 5.0) + 10.0, 1.0)
         return {"lane_error_m": float(e), "heading_error_rad": float(theta),

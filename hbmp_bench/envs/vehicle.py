@@ -144,12 +144,20 @@ class ControlledVehicle:
         k = self.route.index()
         return self.route.edges[k + 1: k + 1 + count]
 
+    def next_lanes(self, count: int = 3) -> tuple[frozenset[str], ...]:
+        """Per edge of :meth:`next_edges`, the route's lanes there (those it can leave the edge by and
+        still reach its goal lane: ``RoadNetwork.route_lanes``): the lanes the followed path enters
+        where a lane has several links onto the next edge."""
+        k = self.route.index()
+        return self.route.lane_sets()[k + 1: k + 1 + count]
+
     # ------------------------------------------------------------------ step
     def begin(self, behavior: int) -> None:
         """Start ``behavior`` (0..4)."""
         self.route.keep()
         self.behavior = Behavior(behavior)
-        self.executed = Behavior(self.driver.begin(behavior, self.state, self.route.begin_lane(), self.next_edges()))
+        self.executed = Behavior(self.driver.begin(behavior, self.state, self.route.begin_lane(), self.next_edges(),
+                                                   self.next_lanes()))
         self.behavior_start_s = self.shared.sim.time
         self.decisions += 1
 
@@ -215,11 +223,11 @@ class ControlledVehicle:
 
     def observe(self, events: StepEvents) -> tuple[dict, dict]:
         """({"occupancy": M_t, "road": R_t}, info) now; ``self.scene`` is the typed scene."""
-        s, a, k = self.state, self.actors, self.route.index()
+        s, a = self.state, self.actors
         road, self.scene = self.route.road_profile()
         road = road_vector(self.shared.observer.config, road, self.scene.stop_distance_m, self.scene.speed_mps)
-        occupancy = self.shared.observer.occupancy(s.xy, s.yaw, self.followed_lane or s.lane,
-                                                   self.route.edges[k + 1: k + 4], a.xy, a.yaw, a.length, a.width)
+        occupancy = self.shared.observer.occupancy(s.xy, s.yaw, self.followed_lane or s.lane, self.next_edges(),
+                                                   a.xy, a.yaw, a.length, a.width, self.next_lanes())
         info = {
             "action_mask": self.action_mask(),
             "events": {kind: getattr(events, kind) for kind in EVENT_KINDS},
@@ -283,12 +291,20 @@ class LoopRoute:
     def action_mask(self) -> np.ndarray:
         return feasible_behaviors(self.v.shared.net, self.v.state.lane)
 
+    def _goal_lane(self) -> str:
+        """The lane R_t's route lanes lead to: the rightmost of the route's last edge."""
+        return self.v.shared.net.edge_lanes[self.edges[-1]][0]
+
+    def lane_sets(self) -> tuple[frozenset[str], ...]:
+        """Per route edge, the lanes to leave it by (``RoadNetwork.route_lanes`` to :meth:`_goal_lane`)."""
+        return self.v.shared.net.route_lanes(self.edges, self._goal_lane())
+
     def road_profile(self) -> tuple[np.ndarray, Scene]:
         """R_t (10,) and the scene."""
         v = self.v
         s, net = v.state, v.shared.net
-        goal_lane = net.edge_lanes[self.edges[-1]][0]
-        road, scene = road_profile(net, s.lane, s.lane_pos, self.edges, self.index(), goal_lane, s.speed, self.light)
+        road, scene = road_profile(net, s.lane, s.lane_pos, self.edges, self.index(), self._goal_lane(), s.speed,
+                                   self.light)
         return road, Scene(**scene)
 
 
@@ -325,7 +341,12 @@ class GoalRoute:
         net, ep = self.v.shared.net, self.episode
         self.edges = tuple(edges)
         self.path = net.route_path(self.edges, ep.start_lane, ep.goal_lane, ep.goal_pos)
+        self._lane_sets = net.route_lanes(self.edges, ep.goal_lane, ep.goal_pos)
         self._pos = {e: i for i, e in enumerate(self.edges)}
+
+    def lane_sets(self) -> tuple[frozenset[str], ...]:
+        """Per route edge, the lanes to leave it by and still reach the goal lane (``RoadNetwork.route_lanes``)."""
+        return self._lane_sets
 
     def index(self) -> int:
         """Index in ``edges`` of the followed lane's edge (routes never repeat an edge)."""
@@ -406,7 +427,7 @@ class GoalRoute:
         if self.privileged is None:
             return road, Scene(**scene, goal_distance_m=goal_distance_m)
         privileged = self.privileged.fields(ego, v.followed_lane, v.next_edges(), v.actors, lights,
-                                            self._junction_exit_m())
+                                            self._junction_exit_m(), v.next_lanes())
         return road, Scene(**scene, **privileged, goal_distance_m=goal_distance_m,
                            route_lane_light=self._route_lane_light(lane, scene["route_lane_offset"]))
 

@@ -184,6 +184,8 @@ class RoadNetwork:
                         )
                     )
             self.connections[edge_id] = tuple(conns)
+        self._link_end = {c.via: c.to_lane for conns in self.connections.values() for c in conns if c.via}
+        """The lane a link leads onto, by the link's first junction lane."""
         self.lane_next: dict[str, tuple[tuple[str, str], ...]] = {}
         for lane_id in list(self.lanes) + list(self.internal_lanes):
             nxt = []
@@ -327,6 +329,22 @@ class RoadNetwork:
         """
         return self._route_lanes(tuple(route), goal_lane, goal_pos, float(change_m), float(change_s), float(cutoff_m))
 
+    def reachable_goal_lanes(self, route: tuple[str, ...], goal_pos: float, start_lane: str, start_pos: float,
+                             change_m: float = 20.0, change_s: float = 3.0) -> tuple[str, ...]:
+        """Lanes of the route's last edge (rightmost first) a car can be in at ``goal_pos`` [m]: within as
+        many lane changes of a lane the last link lands on (of the start lane, for a one-edge route) as the
+        ``goal_pos`` [m] of room allows, one change taking ``max(change_m, change_s * speed limit)`` [m] as
+        in :meth:`route_lanes` (from the start, ``change_m``: the car starts slowly)."""
+        goal_edge = route[-1]
+        if len(route) == 1:
+            entries, room, per_change = [start_lane], goal_pos - start_pos, change_m
+        else:
+            entries = [c.to_lane for c in self.links(route[-2], goal_edge)]
+            room, per_change = goal_pos, max(change_m, change_s * self.lanes[self.edge_lanes[goal_edge][0]].speed)
+        return tuple(lane for lane in self.edge_lanes[goal_edge]
+                     if min(abs(self.lanes[lane].index - self.lanes[e].index) for e in entries) * per_change
+                     <= max(room, 0.0)) or tuple(entries[:1])
+
     @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
     def _route_lanes(self, route: tuple[str, ...], goal_lane: str, goal_pos: float | None, change_m: float,
                      change_s: float, cutoff_m: float) -> tuple[frozenset[str], ...]:
@@ -355,16 +373,28 @@ class RoadNetwork:
         pos = ids.index(lane_id) + side
         return ids[pos] if 0 <= pos < len(ids) else None
 
-    def follow(self, lane_id: str, next_edge: str | None) -> str | None:
+    def follow(self, lane_id: str, next_edge: str | None, into: frozenset[str] = frozenset()) -> str | None:
         """The lane after ``lane_id`` on the way to ``next_edge`` (internal lanes included).
 
-        Falls back to the first successor when no link leads to ``next_edge``; None at a dead end.
+        Where several links of ``lane_id`` lead onto ``next_edge`` (a lane that fans out), the one
+        landing fewest lane changes from the lanes ``into`` (lanes of ``next_edge``: the route's
+        lanes there, :meth:`route_lanes`), the first of those; without ``into``, the first. Falls
+        back to the first successor when no link leads to ``next_edge``; None at a dead end.
         """
         options = self.lane_next.get(lane_id, ())
-        for step, edge in options:
-            if edge == next_edge:
-                return step
+        steps = [step for step, edge in options if edge == next_edge]
+        if len(steps) > 1 and into:
+            return min(steps, key=lambda step: self.changes_into(self._link_end.get(step, step), into))
+        if steps:
+            return steps[0]
         return options[0][0] if options else None
+
+    def changes_into(self, lane_id: str, into: frozenset[str] | None) -> int:
+        """Lane changes from ``lane_id`` to the nearest lane of ``into`` on its edge (0 without ``into``)."""
+        lane = self.lanes.get(lane_id)
+        if lane is None:
+            return len(self.lanes)
+        return min((abs(self.lanes[t].index - lane.index) for t in into or () if t in self.lanes), default=0)
 
     def rightmost_lane(self, edge: str) -> str:
         """The rightmost drivable lane of ``edge``."""

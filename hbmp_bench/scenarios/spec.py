@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, field
 TASKS: tuple[str, ...] = ("Straight", "OneTurn", "Navigation", "NavigationDynamic")
 """The CoRL2017 task categories, as used in env ids (``hbmp_bench/Town01-OneTurn-v0``)."""
 
-EPISODE_RULES_VERSION = 6
+EPISODE_RULES_VERSION = 7
 """Version of how a suite's episodes are drawn and measured, part of ``Suite.definition_hash`` so
 that records and leaderboard results of older episode lists never mix with current ones. Bump it
 whenever the episode lists or their route lengths / timeouts change. 2: route length is the length
@@ -20,7 +20,10 @@ reach the goal lane in time (``RoadNetwork.route_lanes``: one lane change takes 
 all-red after every yellow, no protected left phases, and 20 s greens (12 s in Town02 and Town03);
 the routes are unchanged, the signals the ego meets are not. 6: Town04's outer ramps bridge 6 m over
 the inner carriageway (a car on the bridge no longer collides with one below); those ramps are
-0.6 m longer."""
+0.6 m longer. 7: the goal lane is the rightmost lane of the goal edge that a car entering it by the route's
+last link can reach with room for its lane changes before the goal (``RoadNetwork.reachable_goal_lanes``); it
+was always the rightmost, which in Town03 and Town05 lay 1-2 lanes from where the only link lands, 10-20 m
+before the goal."""
 
 TASK_LABELS = {
     "Straight": "Straight",

@@ -248,7 +248,9 @@ def sample_episode(
     """Draw one episode of ``task`` in ``town`` with ``rng``.
 
     Start and goal positions are drawn on the route's first and last edge, both among
-    :func:`episode_edges`; the route is the shortest route between them. Its length is the length driven along its lanes from the start
+    :func:`episode_edges`; the route is the shortest route between them. The goal lies in the rightmost
+    lane of its edge that a car can reach from where the route's last link lands, with room for its lane
+    changes before the goal (``RoadNetwork.reachable_goal_lanes``). Its length is the length driven along its lanes from the start
     lane to the goal lane, junction lanes included (``RoadNetwork.route_length``). Routes whose length falls
     outside the task's band are rejected; the band widens step by step if a small map has none.
     """
@@ -267,7 +269,8 @@ def sample_episode(
             start_pos = round(float(rng.uniform(0.1, 0.5) * start_len), 2)
             goal_pos = round(float(rng.uniform(0.3, 0.9) * goal_len), 2)
             start_lanes = net.edge_lanes[source]
-            start_lane, goal_lane = start_lanes[int(rng.integers(len(start_lanes)))], net.rightmost_lane(target)
+            start_lane = start_lanes[int(rng.integers(len(start_lanes)))]
+            goal_lane = net.reachable_goal_lanes(route, goal_pos, start_lane, start_pos)[0]
             length = net.route_length(route, start_pos, goal_pos, start_lane, goal_lane)
             if lo / factor * mean <= length <= hi * factor * mean:
                 return Episode(

@@ -83,3 +83,24 @@ def test_unknown_names_list_the_valid_ones(call):
     with pytest.raises(UnknownNameError) as err:
         call()
     assert "valid:" in str(err.value)
+
+
+@pytest.mark.parametrize("suite", ["hbmp", "corl2017"])
+def test_every_goal_lane_can_be_reached_from_where_the_last_link_lands(suite):
+    """No goal 10-20 m behind a junction, 1-2 lanes from where the route's only link lands (Town03 / Town05
+    had 67 such episodes in these two suites): the lane changes to the goal lane fit before the goal, at 3 s
+    (or 20 m) each at the limit; where several lanes can be reached, the goal is in the rightmost."""
+    for town in get_suite(suite).towns:
+        net = road_network(town)
+        for task in ("Straight", "OneTurn", "Navigation"):
+            for ep in suite_episodes(suite, town, task):
+                if len(ep.route) < 2:
+                    continue
+                landings = [net.lanes[c.to_lane].index for c in net.links(ep.route[-2], ep.route[-1])]
+                goal = net.lanes[ep.goal_lane]
+                per_change = max(20.0, 3.0 * net.lanes[net.edge_lanes[ep.route[-1]][0]].speed)
+                changes = min(abs(goal.index - i) for i in landings)
+                assert changes * per_change <= ep.goal_pos, (town, task, ep.index)
+                rightward = [ln for ln in net.edge_lanes[ep.route[-1]] if net.lanes[ln].index < goal.index]
+                assert all(min(abs(net.lanes[ln].index - i) for i in landings) * per_change > ep.goal_pos
+                           for ln in rightward), (town, task, ep.index)
