@@ -341,9 +341,9 @@ class RoadNetwork:
         else:
             entries = [c.to_lane for c in self.links(route[-2], goal_edge)]
             room, per_change = goal_pos, max(change_m, change_s * self.lanes[self.edge_lanes[goal_edge][0]].speed)
+        landings = frozenset(entries)
         return tuple(lane for lane in self.edge_lanes[goal_edge]
-                     if min(abs(self.lanes[lane].index - self.lanes[e].index) for e in entries) * per_change
-                     <= max(room, 0.0)) or tuple(entries[:1])
+                     if self.changes_into(lane, landings) * per_change <= max(room, 0.0)) or tuple(entries[:1])
 
     @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
     def _route_lanes(self, route: tuple[str, ...], goal_lane: str, goal_pos: float | None, change_m: float,

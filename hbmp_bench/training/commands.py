@@ -107,11 +107,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         raise ValueError("a resumed run keeps the PPO options its checkpoint recorded; start a new --out to change "
                          "them")
     init = resolve_init(kind, args.init) if args.resume is None else None
-    if args.ppo:  # bad names and values fail before any worker starts
-        from hbmp_bench.training.ppo import PPOConfig
-
-        if PPOConfig(**PPOConfig.parse_assignments(args.ppo)).anchor_coef > 0 and init is None:
-            raise ValueError("--ppo anchor_coef needs an --init actor to anchor to")
+    ppo = _ppo_config(args, init) if kind != "il" and args.resume is None else None  # a resume keeps its own
     source = (args.resume, RUN_OPTIONS) if args.resume else (init, INPUT_OPTIONS) if init else None
     for name, value in (recorded_env_options(*source) if source else {}).items():
         if getattr(args, name) is None:
@@ -137,7 +133,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     try:
         with exclusive_lock(os.path.join(args.out, "train.lock"), lambda holder: TrainingRunning(
                 f"another training run (pid {holder}) is writing {args.out}: wait for it, or train into another --out")):
-            result = _train(kind, run, env_config, args, init)
+            result = _train(kind, run, env_config, args, init, ppo)
     except KeyboardInterrupt:  # the trainer has closed its workers on the way out
         raise Interrupted(_resume_hint(args)) from None
     p = result["progress"]
@@ -147,22 +143,31 @@ def _cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
-def _train(kind: str, run, env_config, args: argparse.Namespace, init: str | None) -> dict:
-    """DAgger for il, PPO otherwise; the run's progress and the path of its policy."""
+def _ppo_config(args: argparse.Namespace, init: str | None):
+    """The PPO options of a new run (defaults, ``--critic-warmup``, ``--mask-actions``, ``--ppo``), checked
+    before any worker starts."""
+    from hbmp_bench.training.ppo import PPOConfig
+
+    warmup = args.critic_warmup
+    if warmup is None:
+        warmup = CRITIC_WARMUP_EPISODES if init is not None else 0
+    ppo = PPOConfig(mask_actions=args.mask_actions, critic_warmup_episodes=warmup,
+                    **PPOConfig.parse_assignments(args.ppo))
+    if ppo.anchor_coef > 0 and init is None:
+        raise ValueError("--ppo anchor_coef needs an --init actor to anchor to")
+    return ppo
+
+
+def _train(kind: str, run, env_config, args: argparse.Namespace, init: str | None, ppo) -> dict:
+    """DAgger for il, PPO otherwise (``ppo``: None on a resume, which keeps the recorded options); the run's
+    progress and the path of its policy."""
     if kind == "il":
         from hbmp_bench.training.dagger import DaggerConfig, train_dagger
 
         return train_dagger(run, env_config, DaggerConfig(mask_actions=args.mask_actions))
-    from hbmp_bench.training.ppo import PPOConfig, train_ppo
+    from hbmp_bench.training.ppo import train_ppo
 
     label = None if init is None else (args.init or "il")
-    warmup = args.critic_warmup
-    if warmup is None:
-        warmup = CRITIC_WARMUP_EPISODES if init is not None else 0
-    # a resumed run keeps the options its checkpoint recorded
-    options = {"mask_actions": args.mask_actions, "critic_warmup_episodes": warmup,
-               **PPOConfig.parse_assignments(args.ppo)}
-    ppo = None if args.resume else PPOConfig(**options)
     return train_ppo(run, env_config, ppo, init=init, init_label=label)
 
 

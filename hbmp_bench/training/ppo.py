@@ -466,8 +466,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
                 bar.update(1)
             iterations.write({"iteration": progress.iterations, "episode": progress.episodes,
                               "decisions": progress.decisions, "actor_frozen": frozen,
-                              **{k: losses.get(k, "") for k in ("value", "surrogate", "entropy", "kl_init",
-                                                                  "actor_lr")},
+                              **losses,  # value, surrogate, entropy, kl_init, actor_lr
                               "wall_s": progress.to_dict()["wall_s"]})
             alg.freeze_actor(progress.episodes < ppo.critic_warmup_episodes)
             if progress.episodes - last_save >= run.save_every:
