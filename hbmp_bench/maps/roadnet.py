@@ -28,6 +28,17 @@ junction (solid lines in real towns); a change begun there would enter the junct
 lane's connection."""
 
 
+SHARPEST_TURN_RADIUS_M = 3.0
+"""Routes take no junction link that turns tighter than this radius [m] (``sharpest_turn_radius`` of its
+centreline). The ego's bicycle model turns no tighter than wheelbase / tan(max_steer) = 4.1 m; cutting
+across its lane's width it follows the towns' 3.9 m right turns, not the 1.7-2.7 m ones a junction can
+draw (Town04's ramp terminals turned 135 degrees within 13 m: the expert left the road there in 12 of
+160 episodes). SUMO's own vehicles still drive every link."""
+
+TURN_WINDOW_M = 3.0
+"""Arc length [m] over which ``sharpest_turn_radius`` measures a heading change."""
+
+
 WALK_SPAWN_MIN_M = 2.0
 """Pedestrians are spawned only on edges longer than this [m] (1 m from either end)."""
 
@@ -229,13 +240,27 @@ class RoadNetwork:
         return self.lanes[lane_id].edge if lane_id in self.lanes else ""
 
     # ---------------------------------------------------------------- graph
+    # ``connections`` holds every link of the net (foes, stop lines); routes and the lanes a car
+    # follows use the links it can drive: ``successors`` and ``links``.
+    @functools.cached_property
+    def _drivable_links(self) -> dict[str, tuple[Connection, ...]]:
+        return {edge: tuple(c for c in conns if self.link_turn_radius(c) >= SHARPEST_TURN_RADIUS_M)
+                for edge, conns in self.connections.items()}
+
+    def link_turn_radius(self, link: Connection) -> float:
+        """Tightest radius [m] of a link's junction lanes (``sharpest_turn_radius``; inf without any)."""
+        shape = self.link_shape(link)
+        return sharpest_turn_radius(shape) if len(shape) >= 2 else float("inf")
+
     def successors(self, edge: str) -> tuple[str, ...]:
-        """Edges reachable from ``edge`` through one junction (no duplicates, sorted)."""
-        return tuple(sorted({c.to_edge for c in self.connections[edge]}))
+        """Edges a car can reach from ``edge`` through one junction (no duplicates, sorted): by a link no
+        sharper than ``SHARPEST_TURN_RADIUS_M``."""
+        return tuple(sorted({c.to_edge for c in self._drivable_links[edge]}))
 
     def links(self, edge: str, to_edge: str) -> tuple[Connection, ...]:
-        """The lane-level links from ``edge`` to ``to_edge``."""
-        return tuple(c for c in self.connections[edge] if c.to_edge == to_edge)
+        """The lane-level links a car can drive from ``edge`` to ``to_edge`` (no sharper than
+        ``SHARPEST_TURN_RADIUS_M``; ``connections`` has them all)."""
+        return tuple(c for c in self._drivable_links[edge] if c.to_edge == to_edge)
 
     def direction(self, edge: str, to_edge: str) -> str:
         """SUMO link direction of the move ``edge`` → ``to_edge`` (first link's)."""
@@ -328,6 +353,20 @@ class RoadNetwork:
         changes away are kept.
         """
         return self._route_lanes(tuple(route), goal_lane, goal_pos, float(change_m), float(change_s), float(cutoff_m))
+
+    def reachable_start_lanes(self, route: tuple[str, ...], start_pos: float,
+                              change_m: float = 20.0) -> tuple[str, ...]:
+        """Lanes of the route's first edge (rightmost first) from which a car starting at ``start_pos`` [m]
+        can take the route's first link: within as many lane changes of a lane that has it as the room
+        before ``LANE_CHANGE_CUTOFF_M`` allows, one change taking ``change_m`` [m] (the car starts slowly).
+        Every lane for a one-edge route; the link's own lanes where there is no room."""
+        lanes = self.edge_lanes[route[0]]
+        if len(route) == 1:
+            return lanes
+        exits = frozenset(c.from_lane for c in self.links(route[0], route[1]))
+        room = self.edge_length[route[0]] - LANE_CHANGE_CUTOFF_M - start_pos
+        return (tuple(lane for lane in lanes if self.changes_into(lane, exits) * change_m <= max(room, 0.0))
+                or tuple(lane for lane in lanes if lane in exits))
 
     def reachable_goal_lanes(self, route: tuple[str, ...], goal_pos: float, start_lane: str, start_pos: float,
                              change_m: float = 20.0, change_s: float = 3.0) -> tuple[str, ...]:
@@ -638,6 +677,25 @@ def project_on_polyline(shape: np.ndarray, point: np.ndarray) -> tuple[float, fl
     i = int(np.argmin(dist))
     seg_len = np.sqrt(seg_len2)
     return float(seg_len[:i].sum() + t[i] * seg_len[i]), float(dist[i])
+
+
+def sharpest_turn_radius(shape: np.ndarray, window_m: float = TURN_WINDOW_M, spacing: float = 0.25) -> float:
+    """Tightest radius [m] of a polyline (N, 2) [m]: ``window_m`` over the largest heading change [rad]
+    within any ``window_m`` of its arc (the whole arc when shorter); inf where it does not turn."""
+    seg = np.hypot(*np.diff(shape, axis=0).T)
+    pts = shape[np.append(True, seg > 1e-9)]
+    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    if len(pts) < 2 or arc[-1] <= spacing:
+        return float("inf")
+    s = np.append(np.arange(0.0, arc[-1], spacing), arc[-1])
+    x, y = np.interp(s, arc, pts[:, 0]), np.interp(s, arc, pts[:, 1])
+    heading = np.unwrap(np.arctan2(np.diff(y), np.diff(x)))
+    k = min(max(int(round(window_m / spacing)), 1), len(heading) - 1)
+    if k < 1:
+        return float("inf")
+    turn = float(np.max(np.abs(heading[k:] - heading[:-k])))
+    span = float(s[k] - s[0]) if k < len(s) else float(arc[-1])
+    return span / turn if turn > 1e-9 else float("inf")
 
 
 def point_along(shape: np.ndarray, pos: float) -> np.ndarray:

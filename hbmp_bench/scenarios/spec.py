@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, field
 TASKS: tuple[str, ...] = ("Straight", "OneTurn", "Navigation", "NavigationDynamic")
 """The CoRL2017 task categories, as used in env ids (``hbmp_bench/Town01-OneTurn-v0``)."""
 
-EPISODE_RULES_VERSION = 7
+EPISODE_RULES_VERSION = 8
 """Version of how a suite's episodes are drawn and measured, part of ``Suite.definition_hash`` so
 that records and leaderboard results of older episode lists never mix with current ones. Bump it
 whenever the episode lists or their route lengths / timeouts change. 2: route length is the length
@@ -23,7 +23,10 @@ the inner carriageway (a car on the bridge no longer collides with one below); t
 0.6 m longer. 7: the goal lane is the rightmost lane of the goal edge that a car entering it by the route's
 last link can reach with room for its lane changes before the goal (``RoadNetwork.reachable_goal_lanes``); it
 was always the rightmost, which in Town03 and Town05 lay 1-2 lanes from where the only link lands, 10-20 m
-before the goal."""
+before the goal. 8: routes take no junction link sharper than a 3 m radius (``SHARPEST_TURN_RADIUS_M``: Town04's
+ramp terminals had 135-degree turns within 13 m, Town03 and Town05 a few 2.5 m ones), and the start lane is one
+from which the route's first link can be reached (``RoadNetwork.reachable_start_lanes``: Town03 had starts 6 m
+before a junction, two lanes from the only lane that turns)."""
 
 TASK_LABELS = {
     "Straight": "Straight",

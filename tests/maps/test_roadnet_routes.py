@@ -89,7 +89,8 @@ def test_junction_position_runs_through_the_junction_without_jumps():
 @pytest.mark.parametrize("town", ["Town03", "Town05"])
 def test_routes_are_shortest_by_length_driven(town):
     """Routes are chosen by the length driven, junction lanes included (sumolib's router over
-    internal edges agrees); choosing by edge lengths alone took detours of up to 8.5 % here."""
+    internal edges agrees where its route is drivable); choosing by edge lengths alone took detours of up
+    to 8.5 % here."""
     ref_net = sumolib.net.readNet(str(net_path(town)), withInternal=True)
     net = road_network(town)
     episodes = suite_episodes("corl2017", town, "Navigation") + suite_episodes("corl2017", town, "OneTurn")
@@ -97,6 +98,8 @@ def test_routes_are_shortest_by_length_driven(town):
         edges, cost = ref_net.getShortestPath(ref_net.getEdge(ep.route[0]), ref_net.getEdge(ep.route[-1]),
                                               withInternal=True, vClass="passenger")
         reference = tuple(e.getID() for e in edges if e.getFunction() != "internal")
+        if any(b not in net.successors(a) for a, b in zip(reference[:-1], reference[1:])):
+            continue  # SUMO's router also takes links too sharp for a car (SHARPEST_TURN_RADIUS_M)
         if reference != ep.route:  # a tie or SUMO's shared length on a curved edge: never a real detour
             ours = net.route_length(ep.route, 0.0, net.edge_length[ep.route[-1]])
             theirs = net.route_length(reference, 0.0, net.edge_length[reference[-1]])
@@ -147,3 +150,45 @@ def test_route_lanes_leave_room_for_every_lane_change_before_the_goal():
     assert good[-2] == {"-C2R2_C3R2_1"}
     assert net.route_lanes(route, "-C1R2_C2R2_1", goal_pos=45.0)[-2] == {"-C2R2_C3R2_1", "-C2R2_C3R2_2"}
     assert net.route_lanes(route, "-C1R2_C2R2_1", goal_pos=90.0)[-2] == set(net.lanes_to(route[2], route[3]))
+
+
+def test_sharpest_turn_radius_measures_arcs_and_ignores_straight_lines():
+    from hbmp_bench.maps.roadnet import sharpest_turn_radius
+
+    theta = np.linspace(0.0, np.pi / 2, 200)
+    for radius in (4.0, 10.0, 30.0):
+        arc = np.c_[radius * np.cos(theta), radius * np.sin(theta)]
+        assert sharpest_turn_radius(arc) == pytest.approx(radius, rel=0.03)
+    assert sharpest_turn_radius(np.array([[0.0, 0.0], [5.0, 0.0], [12.0, 0.0]])) == np.inf
+    # a straight stretch, then a 1.5 m-radius half circle (4.7 m of arc, longer than the window): it decides
+    half = np.linspace(0.0, np.pi, 200)[1:]
+    hook = np.vstack([np.c_[np.linspace(-20.0, 0.0, 20), np.zeros(20)],
+                      np.c_[1.5 * np.sin(half), 1.5 - 1.5 * np.cos(half)]])
+    assert sharpest_turn_radius(hook) == pytest.approx(1.5, rel=0.1)
+
+
+def test_routes_avoid_links_too_sharp_for_a_car_but_foes_keep_them():
+    """Town04's ramp terminal turns 135 degrees within 13 m from the inner carriageway's exit onto the outer
+    one's entry: no route takes it, while the link stays in ``connections`` (SUMO's cars still drive it, so
+    it still counts as a foe and carries its light)."""
+    from hbmp_bench.maps.roadnet import SHARPEST_TURN_RADIUS_M
+
+    net = road_network("Town04")
+    sharp = [c for c in net.connections["Din_E_R_E"] if c.to_edge == "R_E_Mout_E"]
+    assert sharp and all(net.link_turn_radius(c) < SHARPEST_TURN_RADIUS_M for c in sharp)
+    assert "R_E_Mout_E" not in net.successors("Din_E_R_E") and not net.links("Din_E_R_E", "R_E_Mout_E")
+    assert "R_E_Min_E" in net.successors("Din_E_R_E")
+    assert all(net.link_turn_radius(c) >= SHARPEST_TURN_RADIUS_M
+               for conns in net.connections.values() for c in conns if c in net.links(c.from_edge, c.to_edge))
+
+
+def test_start_lanes_reach_the_first_link():
+    """Town03: the start edge ``-X90_95_I90_130`` is 12.5 m long and only its left lane turns onto
+    ``X90_95_I125_95``: a start 6 m in can only be in that lane; on a long edge every lane qualifies."""
+    net = road_network("Town03")
+    route = ("-X90_95_I90_130", "X90_95_I125_95")
+    turning = {c.from_lane for c in net.links(*route)}
+    assert set(net.reachable_start_lanes(route, 5.97)) == turning
+    long_edge = max(net.edge_lanes, key=lambda e: net.edge_length[e] if len(net.edge_lanes[e]) > 1 else 0)
+    nxt = net.successors(long_edge)[0]
+    assert net.reachable_start_lanes((long_edge, nxt), 1.0) == net.edge_lanes[long_edge]

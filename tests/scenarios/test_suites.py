@@ -104,3 +104,26 @@ def test_every_goal_lane_can_be_reached_from_where_the_last_link_lands(suite):
                 rightward = [ln for ln in net.edge_lanes[ep.route[-1]] if net.lanes[ln].index < goal.index]
                 assert all(min(abs(net.lanes[ln].index - i) for i in landings) * per_change > ep.goal_pos
                            for ln in rightward), (town, task, ep.index)
+
+
+@pytest.mark.parametrize("suite", ["hbmp", "corl2017"])
+def test_every_route_is_drivable_from_its_start_lane(suite):
+    """Routes take only links no sharper than a 3 m radius (Town04's ramp terminals turned 135 degrees in
+    13 m and the expert left the road there), and the start lane reaches the route's first link before the
+    lane-change cutoff, 20 m per change (Town03 had starts 6 m before a junction, two lanes from the only
+    lane that turns: the ego looped the block until it timed out)."""
+    from hbmp_bench.maps.roadnet import LANE_CHANGE_CUTOFF_M, SHARPEST_TURN_RADIUS_M
+
+    for town in get_suite(suite).towns:
+        net = road_network(town)
+        for task in TASKS:
+            for ep in suite_episodes(suite, town, task):
+                for edge, nxt in zip(ep.route[:-1], ep.route[1:]):
+                    assert any(net.link_turn_radius(c) >= SHARPEST_TURN_RADIUS_M
+                               for c in net.connections[edge] if c.to_edge == nxt), (town, task, ep.index, edge, nxt)
+                if len(ep.route) < 2:
+                    continue
+                exits = [net.lanes[c.from_lane].index for c in net.links(ep.route[0], ep.route[1])]
+                changes = min(abs(net.lanes[ep.start_lane].index - i) for i in exits)
+                room = net.edge_length[ep.route[0]] - LANE_CHANGE_CUTOFF_M - ep.start_pos
+                assert changes == 0 or changes * 20.0 <= room, (town, task, ep.index)
