@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Iterable
-from dataclasses import asdict, dataclass, fields
+from dataclasses import MISSING, asdict, dataclass, fields
 from pathlib import Path
 
 PENALTIES = {
@@ -134,19 +134,27 @@ def latest_per_key(records: Iterable[EpisodeRecord]) -> list[EpisodeRecord]:
 
 
 def read_records(path: str | Path) -> list[EpisodeRecord]:
-    """Records of a JSON-lines file; a torn last line (from a kill mid-write) is ignored."""
+    """Records of a JSON-lines file; a torn last line (from a kill mid-write) is ignored. A line that is
+    JSON but no episode record (another kind of file) raises ValueError naming the file and line."""
     with open(path, encoding="utf-8") as fh:
-        return parse_records(fh)
+        try:
+            return parse_records(fh)
+        except ValueError as err:
+            raise ValueError(f"{path}: {err} (not an episode records file?)") from None
 
 
 def parse_records(lines: Iterable[str]) -> list[EpisodeRecord]:
-    """Records of JSON lines (``read_records`` without the file); lines that are not JSON are skipped."""
+    """Records of JSON lines (``read_records`` without the file); lines that are not JSON are skipped,
+    a JSON line without a record's fields raises ValueError."""
     names = {f.name for f in fields(EpisodeRecord)}
+    required = {f.name for f in fields(EpisodeRecord) if f.default is MISSING and f.default_factory is MISSING}
     out = []
-    for line in lines:
+    for number, line in enumerate(lines, 1):
         try:
             row = json.loads(line)
         except json.JSONDecodeError:
             continue
+        if not isinstance(row, dict) or not required <= row.keys():
+            raise ValueError(f"line {number} is not an episode record")
         out.append(EpisodeRecord(**{k: v for k, v in row.items() if k in names}))
     return out

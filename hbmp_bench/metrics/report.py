@@ -74,7 +74,8 @@ VIEW_LEGENDS: dict[str, str] = {
 
 
 def records_files(paths: Iterable[str | os.PathLike]) -> list[Path]:
-    """The ``.jsonl`` files named by ``paths`` (files, or folders searched non-recursively)."""
+    """The ``.jsonl`` files named by ``paths`` (files, or folders searched non-recursively); a named file
+    of another kind raises ValueError."""
     files: list[Path] = []
     for p in map(Path, paths):
         if p.is_dir():
@@ -83,6 +84,8 @@ def records_files(paths: Iterable[str | os.PathLike]) -> list[Path]:
                 raise FileNotFoundError(f"no .jsonl records in {p}")
             files.extend(found)
         elif p.is_file():
+            if p.suffix != ".jsonl":
+                raise ValueError(f"{p} is not a records file (.jsonl)")
             files.append(p)
         else:
             raise FileNotFoundError(f"no records file or folder {p}")

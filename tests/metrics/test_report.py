@@ -175,3 +175,14 @@ def test_summary_lines_explain_every_summary_key():
     assert red.split()[1] == "2" and "events" in red
     score = next(line for line in lines if line.startswith("mean_driving_score"))
     assert "route completion" in score and "penalty" in score
+
+
+def test_a_file_that_is_not_records_is_named_in_a_clear_error(tmp_path):
+    """The evaluator's provenance sidecar (pretty-printed JSON) passed to the report by a glob: a ValueError
+    naming the file, not an AttributeError from deep inside."""
+    path = tmp_path / "hbmp__expert.jsonl.provenance.json"
+    path.write_text(json.dumps({"code": "abc", "episodes": [1, 2, 3]}, indent=2) + "\n")
+    with pytest.raises(ValueError, match="provenance.json: line 6 is not an episode record"):
+        read_records(path)
+    with pytest.raises(ValueError, match="provenance.json is not a records file"):
+        load_results([path])
