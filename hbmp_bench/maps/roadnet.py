@@ -354,19 +354,21 @@ class RoadNetwork:
         """
         return self._route_lanes(tuple(route), goal_lane, goal_pos, float(change_m), float(change_s), float(cutoff_m))
 
-    def reachable_start_lanes(self, route: tuple[str, ...], start_pos: float,
+    def reachable_start_lanes(self, route: tuple[str, ...], start_pos: float, goal_pos: float,
                               change_m: float = 20.0) -> tuple[str, ...]:
         """Lanes of the route's first edge (rightmost first) from which a car starting at ``start_pos`` [m]
-        can take the route's first link: within as many lane changes of a lane that has it as the room
-        before ``LANE_CHANGE_CUTOFF_M`` allows, one change taking ``change_m`` [m] (the car starts slowly).
-        Every lane for a one-edge route; the link's own lanes where there is no room."""
+        can follow the route to its goal at ``goal_pos`` [m]: within as many lane changes of the first
+        edge's good lanes (:meth:`route_lanes`, to the goal lane of :meth:`reachable_goal_lanes`) as the
+        room before ``LANE_CHANGE_CUTOFF_M`` allows, one change taking ``change_m`` [m] (the car starts
+        slowly). Every lane for a one-edge route; the good lanes themselves where there is no room."""
         lanes = self.edge_lanes[route[0]]
         if len(route) == 1:
             return lanes
-        exits = frozenset(c.from_lane for c in self.links(route[0], route[1]))
+        goal_lane = self.reachable_goal_lanes(route, goal_pos, lanes[0], start_pos)[0]
+        good = self.route_lanes(route, goal_lane, goal_pos)[0]
         room = self.edge_length[route[0]] - LANE_CHANGE_CUTOFF_M - start_pos
-        return (tuple(lane for lane in lanes if self.changes_into(lane, exits) * change_m <= max(room, 0.0))
-                or tuple(lane for lane in lanes if lane in exits))
+        return (tuple(lane for lane in lanes if self.changes_into(lane, good) * change_m <= max(room, 0.0))
+                or tuple(lane for lane in lanes if lane in good))
 
     def reachable_goal_lanes(self, route: tuple[str, ...], goal_pos: float, start_lane: str, start_pos: float,
                              change_m: float = 20.0, change_s: float = 3.0) -> tuple[str, ...]:

@@ -25,8 +25,8 @@ last link can reach with room for its lane changes before the goal (``RoadNetwor
 was always the rightmost, which in Town03 and Town05 lay 1-2 lanes from where the only link lands, 10-20 m
 before the goal. 8: routes take no junction link sharper than a 3 m radius (``SHARPEST_TURN_RADIUS_M``: Town04's
 ramp terminals had 135-degree turns within 13 m, Town03 and Town05 a few 2.5 m ones), and the start lane is one
-from which the route's first link can be reached (``RoadNetwork.reachable_start_lanes``: Town03 had starts 6 m
-before a junction, two lanes from the only lane that turns)."""
+from which the route can be followed (``RoadNetwork.reachable_start_lanes``: Town03 had starts 6-8 m before a
+junction, a lane or two from the only lane that continues, and the ego looped the block until it timed out)."""
 
 TASK_LABELS = {
     "Straight": "Straight",

@@ -249,8 +249,8 @@ def sample_episode(
 
     Start and goal positions are drawn on the route's first and last edge, both among
     :func:`episode_edges`; the route is the shortest route between them over the links a car can drive
-    (``RoadNetwork.successors``). The start lane is one from which the route's first link can be taken
-    (``RoadNetwork.reachable_start_lanes``). The goal lies in the rightmost
+    (``RoadNetwork.successors``). The start lane is one from which the route can be followed: within the
+    lane changes the start edge has room for of its good lanes (``RoadNetwork.reachable_start_lanes``). The goal lies in the rightmost
     lane of its edge that a car can reach from where the route's last link lands, with room for its lane
     changes before the goal (``RoadNetwork.reachable_goal_lanes``). Its length is the length driven along its lanes from the start
     lane to the goal lane, junction lanes included (``RoadNetwork.route_length``). Routes whose length falls
@@ -270,7 +270,7 @@ def sample_episode(
             start_len, goal_len = net.edge_length[source], net.edge_length[target]
             start_pos = round(float(rng.uniform(0.1, 0.5) * start_len), 2)
             goal_pos = round(float(rng.uniform(0.3, 0.9) * goal_len), 2)
-            start_lanes = net.reachable_start_lanes(route, start_pos)
+            start_lanes = net.reachable_start_lanes(route, start_pos, goal_pos)
             start_lane = start_lanes[int(rng.integers(len(start_lanes)))]
             goal_lane = net.reachable_goal_lanes(route, goal_pos, start_lane, start_pos)[0]
             length = net.route_length(route, start_pos, goal_pos, start_lane, goal_lane)

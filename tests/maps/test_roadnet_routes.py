@@ -182,13 +182,16 @@ def test_routes_avoid_links_too_sharp_for_a_car_but_foes_keep_them():
                for conns in net.connections.values() for c in conns if c in net.links(c.from_edge, c.to_edge))
 
 
-def test_start_lanes_reach_the_first_link():
+def test_start_lanes_reach_the_route_lanes():
     """Town03: the start edge ``-X90_95_I90_130`` is 12.5 m long and only its left lane turns onto
-    ``X90_95_I125_95``: a start 6 m in can only be in that lane; on a long edge every lane qualifies."""
+    ``X90_95_I125_95``: a start 6 m in can only be in that lane. ``AE_I230_200`` (16 m) leads onto another
+    16 m edge whose left lane alone continues to ``-I195_235_X230_235``: no room for a change on either, so
+    only the left lane of the start edge follows that route. On a long edge every lane qualifies."""
     net = road_network("Town03")
     route = ("-X90_95_I90_130", "X90_95_I125_95")
-    turning = {c.from_lane for c in net.links(*route)}
-    assert set(net.reachable_start_lanes(route, 5.97)) == turning
+    assert set(net.reachable_start_lanes(route, 5.97, 8.0)) == {c.from_lane for c in net.links(*route)}
+    route = ("AE_I230_200", "I230_200_X230_235", "-I195_235_X230_235", "-AN_I195_235")
+    assert net.reachable_start_lanes(route, 7.65, 20.0) == ("AE_I230_200_2",)
     long_edge = max(net.edge_lanes, key=lambda e: net.edge_length[e] if len(net.edge_lanes[e]) > 1 else 0)
     nxt = net.successors(long_edge)[0]
-    assert net.reachable_start_lanes((long_edge, nxt), 1.0) == net.edge_lanes[long_edge]
+    assert net.reachable_start_lanes((long_edge, nxt), 1.0, 10.0) == net.edge_lanes[long_edge]
