@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -194,10 +195,15 @@ class ContinuousDriver(ModelDriver):
     def reference_paths(self, lane_id: str, next_edges: tuple[str, ...],
                         into: tuple[frozenset[str], ...] = ()) -> ReferencePaths:
         """Centrelines of the left, current and right lane, each continued along the route (into its
-        lanes ``into``: :meth:`lane_path`)."""
+        lanes ``into``: :meth:`lane_path`), and the road beside the current lane up to its end: bounded
+        on a side without a lane (the footprint inside the lane's width), open where there is one."""
         sides = [self.net.neighbour_lane(lane_id, side) for side in (+1, -1)]
         left, right = (None if lane is None else self.lane_path(lane, next_edges, into) for lane in sides)
-        return ReferencePaths(left, self.lane_path(lane_id, next_edges, into), right)
+        lane = self.net.lane(lane_id)
+        half = max(lane.width / 2.0 - self.executor.planner_cfg.width / 2.0, 0.0)
+        corridor = (-math.inf if right is not None else -half, math.inf if left is not None else half,
+                    self.config.lane_back_m + lane.shape_length)
+        return ReferencePaths(left, self.lane_path(lane_id, next_edges, into), right, corridor)
 
     def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...],
               into: tuple[frozenset[str], ...] = ()) -> int:

@@ -47,7 +47,7 @@ import numpy as np
 
 from .behaviors import Behavior, BehaviorConfig, reference_speed
 from .frame import Path
-from .planner import PlannerConfig, PlanningProblem, PlanResult, plan
+from .planner import NO_CORRIDOR, PlannerConfig, PlanningProblem, PlanResult, plan
 from .state import Obstacles, VehicleState
 from .tracking import TrackerConfig, TrajectoryTracker
 from .vehicle import Control, VehicleParams
@@ -64,11 +64,14 @@ def reward_from_cost(c_total, scale: float = 1.0):
 
 
 class ReferencePaths(NamedTuple):
-    """Centerlines of the left, current and right lane (left / right may be ``None``)."""
+    """Centerlines of the left, current and right lane (left / right may be ``None``), and the road
+    beside the current one: ``corridor`` as :class:`.planner.PlanningProblem` takes it, used while the
+    ego keeps its lane (default: no bounds)."""
 
     left: Path | None
     current: Path
     right: Path | None
+    corridor: tuple[float, float, float] = NO_CORRIDOR
 
 
 def target_path(behavior: Behavior | int, refs: ReferencePaths) -> tuple[Behavior, Path]:
@@ -172,7 +175,7 @@ class BehaviorExecutor:
         refs = ReferencePaths(*refs)
         if refs.current is None:
             raise ValueError("refs.current (the current lane centerline) is required")
-        for p in refs:
+        for p in refs[:3]:
             if p is not None and not isinstance(p, Path):
                 raise ValueError(f"reference paths must be Path or None, got {type(p).__name__}")
         if not (math.isfinite(speed_limit) and speed_limit > 0):
@@ -181,6 +184,7 @@ class BehaviorExecutor:
         self.behavior, self.target = target_path(self.requested, refs)
         self.speed_limit = float(speed_limit)
         changes_lane = self.behavior in (Behavior.CHANGE_LEFT, Behavior.CHANGE_RIGHT)
+        self.corridor = NO_CORRIDOR if changes_lane else refs.corridor
         self.max_duration = self.cfg.max_duration if changes_lane else self.cfg.lane_keeping_max_duration
         self.v_ref = reference_speed(self.behavior, ego.v, speed_limit, self.behavior_cfg)
         self._s, *_ = self.target.project_pose(ego.x, ego.y, ego.yaw)
@@ -236,7 +240,7 @@ class BehaviorExecutor:
         replan = self._plan is None or (self.n_steps % self.cfg.replan_every == 0) or self._done
         if replan:
             self._plan = plan(PlanningProblem(ego, self.target, self.v_ref, self.speed_limit,
-                                              obstacles, s_hint=self._s), self.planner_cfg)
+                                              obstacles, s_hint=self._s, corridor=self.corridor), self.planner_cfg)
             self._t_since_plan = 0.0
         control = self.tracker.control(ego, self._plan.trajectory, self._plan.times,
                                        self.cfg.dt, self._t_since_plan)

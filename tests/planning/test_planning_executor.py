@@ -280,3 +280,47 @@ def test_a_standing_car_asked_to_move_still_converges_to_the_lane():
         ExecutorConfig(lane_keeping_max_duration=0.0)
     with pytest.raises(ValueError, match="min_duration"):
         ExecutorConfig(lane_keeping_max_duration=0.5)
+
+
+def _drift_beside_a_car(corridor, decisions=10):
+    """The ego at 20 m/s in the rightmost lane, a car alongside in the lane to its left at the same speed;
+    keep decisions. Returns the ego's lateral offsets [m] over the run."""
+    ex = BehaviorExecutor()
+    ego = VehicleState(0.0, 0.0, 0.0, 20.0)
+    others = Obstacles.from_rows(np.array([[1.0, LANE, 0.0, 20.0, 4.6, 2.0]]))
+    offsets = []
+    for _ in range(decisions):
+        r = simulate_behavior(ex, Behavior.KEEP, ego, ReferencePaths(lane(LANE), lane(0.0), None, corridor), 25.0,
+                              others)
+        ego, others = r.final, r.obstacles
+        offsets.extend(r.states[:, 1])
+    return np.array(offsets)
+
+
+def test_the_corridor_stops_the_swerve_ratchet_at_the_road_edge():
+    """Re-planning at 10 Hz, the sample that swerves away from a car alongside first is the cheapest
+    every time, and each executes only its first step: without a road edge the ego ends up 1.3 m right of
+    its lane's centre (its footprint 0.5 m off a 3.5 m lane). With the corridor of a lane that has no lane
+    to its right (the footprint inside the lane: 0.8 m each side for the planner's 1.9 m wide car) it stays on the road."""
+    half = LANE / 2 - PlannerConfig().width / 2
+    free = _drift_beside_a_car((-np.inf, np.inf, np.inf))
+    bounded = _drift_beside_a_car((-half, np.inf, np.inf))
+    assert free.min() < -1.0
+    assert bounded.min() >= -half - 0.1
+
+
+def test_on_road_bounds_only_the_lane_and_never_what_the_ego_already_is():
+    from hbmp_bench.planning.planner import NO_CORRIDOR, on_road
+
+    s = np.tile(np.linspace(0.0, 30.0, 4), (3, 1))
+    e = np.array([[0.0, -0.5, -0.9, -1.5],    # leaves the road at s = 20 m
+                  [0.0, -0.5, -0.7, -0.7],    # stays on it
+                  [0.0, 0.5, 3.0, 3.0]])      # into the open left lane
+    frenet = np.stack([s, e], axis=2)
+    assert on_road(frenet, (-0.8, np.inf, np.inf)).tolist() == [False, True, True]
+    assert on_road(frenet, (-0.8, np.inf, 15.0)).tolist() == [True, True, True]   # the lane ends at 15 m
+    assert on_road(frenet, NO_CORRIDOR).all()
+    back = np.array([[-1.0, -0.9, -0.8, -0.7],   # the ego starts 1 m right of the centre: returning,
+                     [-1.0, -1.0, -1.0, -1.0],   # holding,
+                     [-1.0, -1.2, -1.3, -1.3]])  # or going further out
+    assert on_road(np.stack([s, back], axis=2), (-0.8, np.inf, np.inf)).tolist() == [True, True, False]
