@@ -34,3 +34,17 @@ def test_vehicle_centric_grid_differs_from_deformed_on_a_turn():
         grids[kind] = total
     assert grids["deformed"].sum() > 0 and grids["vehicle_centric"].sum() > 0
     assert not np.array_equal(grids["deformed"], grids["vehicle_centric"])
+
+
+def test_record_says_what_traffic_spawned(tmp_path, monkeypatch):
+    monkeypatch.setenv("HBMP_BENCH_DATA", str(tmp_path))
+    src = tmp_path / "mine.net.xml"
+    shutil.copy(net_path("Town02"), src)
+    import_map(src, "MyTown", like="Town02")
+    env = BehaviorEnv(town="MyTown", task="NavigationDynamic", episode_index=0, fidelity="event")
+    env.reset(seed=0)
+    record = env.record()
+    persons = env.world.sim._api.person.getIDCount()
+    env.close()
+    asked = env.episodes[0].traffic
+    assert (record.traffic_vehicles, record.traffic_pedestrians) == (asked.vehicles, persons) == (15, 50)
