@@ -117,7 +117,9 @@ class DrivingWorld:
         return observations, infos
 
     def long_route(self, rng: np.random.Generator, edge: str) -> list[str]:
-        """A chain of random legs from ``edge``, at least ``config.background_route_m`` long."""
+        """A chain of random legs from ``edge``, at least ``config.background_route_m`` long, or up to
+        an edge from which no link a car can drive leads on (routes take no link sharper than
+        ``SHARPEST_TURN_RADIUS_M``, which leaves dead ends in real towns: CARLA's Town07 has 3-5)."""
         route, total = [edge], 0.0
         edges = self.net.drivable_edges
         while total < self.config.background_route_m:
@@ -126,6 +128,8 @@ class DrivingWorld:
                 continue
             dist, prev = self.net.shortest_tree(route[-1])
             if target not in dist:
+                if len(dist) == 1:  # a dead end: nothing else is reachable
+                    break
                 continue
             route.extend(self.net.path_to(prev, route[-1], target)[1:])
             total += dist[target]
@@ -135,7 +139,8 @@ class DrivingWorld:
         """Insert the episode's background vehicles and pedestrians; returns the routes of the
         controlled ones (handed over, tracked and standing)."""
         traffic = self.episode.traffic
-        edges = [e for e in self.net.drivable_edges if e != ego_edge and self.net.edge_length[e] > 15.0]
+        edges = [e for e in self.net.drivable_edges if e != ego_edge and self.net.edge_length[e] > 15.0
+                 and self.net.successors(e)]
         taken: dict[str, list[float]] = {}
         routes: dict[str, tuple[str, ...]] = {}
         for k in range(traffic.vehicles):

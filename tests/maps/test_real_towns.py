@@ -113,3 +113,20 @@ def test_like_borrows_a_built_in_towns_task_parameters():
     assert 0.5 * 360 <= sum(like_nav) / len(like_nav) <= 1.5 * 360  # CoRL2017's Town02 band
     assert own_nav != like_nav
     assert TASKS[-1] == "NavigationDynamic"
+
+
+@pytest.mark.parametrize("town", REAL_TOWNS or ["none"])
+def test_dynamic_episodes_start_with_their_traffic(town):
+    """Every source's NavigationDynamic episodes start with what they ask for (Town07's dead ends once hung
+    the background routes; CARLA's own net has no walkable edge until the import guesses sidewalks)."""
+    from hbmp_bench.envs import BehaviorEnv
+
+    for kind, src in _sources(town):
+        import_map(src, f"{town}_{kind}")
+        env = BehaviorEnv(town=f"{town}_{kind}", task="NavigationDynamic", fidelity="event")
+        for index in range(3):
+            env.reset(seed=index, options={"episode_index": index})
+            record, asked = env.record(), env.episodes[index].traffic
+            assert asked.pedestrians > 0
+            assert (record.traffic_vehicles, record.traffic_pedestrians) == (asked.vehicles, asked.pedestrians)
+        env.close()
