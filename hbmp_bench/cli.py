@@ -9,6 +9,7 @@ import json
 import os
 import sys
 import sysconfig
+from pathlib import Path
 
 from hbmp_bench.errors import Interrupted, UnknownNameError, UserError
 
@@ -85,19 +86,24 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _net_file(path: str) -> Path:
+    """A ``.net.xml`` file given to ``maps stats`` (a SUMO net as it is, not imported)."""
+    file = Path(path).expanduser()
+    if not file.is_file():
+        raise FileNotFoundError(f"net file not found: {path}")
+    return file
+
+
 def _cmd_maps(args: argparse.Namespace) -> int:
-    from hbmp_bench.maps import available_maps, import_map, map_stats, remove_map
+    from hbmp_bench.maps import available_maps, import_map, map_stats, net_stats, remove_map
 
     if args.maps_cmd == "stats":
+        from hbmp_bench.maps.stats import format_stats
+
         names = args.names or list(available_maps())
-        stats = {name: map_stats(name) for name in names}
-        if args.json:
-            print(json.dumps(stats, indent=2))
-        else:
-            for name, s in stats.items():
-                print(name)
-                for key, value in s.items():
-                    print(f"  {key:24s} {value}")
+        stats = {name: net_stats(_net_file(name)) if name.endswith(".net.xml") else map_stats(name)
+                 for name in names}
+        print(json.dumps(stats, indent=2) if args.json else format_stats(stats))
         return 0
     if args.maps_cmd == "import":
         path = import_map(args.file, args.name, like=args.like, sidewalks=not args.no_sidewalks,
@@ -157,7 +163,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("maps", help="map statistics, import and removal")
     msub = p.add_subparsers(dest="maps_cmd", required=True)
     q = msub.add_parser("stats", help="statistics of built-in and imported maps")
-    q.add_argument("names", nargs="*", help="maps to describe (default: every built-in and imported map)")
+    q.add_argument("names", nargs="*", help="maps to describe side by side, or SUMO .net.xml files as they are "
+                   "(e.g. CARLA's own net beside its import; default: every built-in and imported map)")
     q.add_argument("--json", action="store_true", help="print JSON")
     q = msub.add_parser("import", help="import an OpenDRIVE .xodr or SUMO .net.xml under a name (into "
                         "$HBMP_BENCH_DATA/maps, or ~/.local/share/hbmp_bench/maps when it is unset)")

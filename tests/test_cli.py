@@ -35,9 +35,23 @@ def test_bad_names_exit_2_with_valid_names(capsys):
 def test_maps_stats_json(capsys):
     assert main(["maps", "stats", "Town02", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)["Town02"]
-    for key in ("directed_road_length_m", "lanes_per_edge", "tls_junctions", "priority_junctions", "roundabouts",
-                "extent_m", "has_sidewalks"):
+    for key in ("directed_road_length_m", "lanes_per_edge", "lanes_per_edge_mean", "tls_junctions",
+                "priority_junctions", "roundabouts", "extent_m", "has_sidewalks"):
         assert key in out
+
+
+def test_maps_stats_compares_maps_and_net_files(tmp_path, capsys):
+    from hbmp_bench.maps import map_stats, net_path
+
+    net = str(net_path("Town02"))
+    assert main(["maps", "stats", "Town02", net, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out[net] == map_stats("Town02")
+    assert main(["maps", "stats", "Town02", net]) == 0
+    header, *rows = capsys.readouterr().out.splitlines()
+    assert header.split() == ["Town02", net] and any(r.split()[0] == "lanes_per_edge_mean" for r in rows)
+    assert main(["maps", "stats", str(tmp_path / "nowhere.net.xml")]) == 2
+    assert "nowhere.net.xml" in capsys.readouterr().err
 
 
 # ---------------------------------------------------------------- errors a user meets: one line, no traceback

@@ -64,6 +64,8 @@ class DrivingWorld:
         """The vehicles whose episode runs, ego first."""
         self._running: set[str] = set()
         self._committed: set[str] = set()
+        self.spawned: tuple[int, int] = (0, 0)
+        """(background vehicles, pedestrians) put into the simulation at the episode's start."""
 
     def make_driver(self, vehicle_id: str, vtype: VehicleType, kind: str):
         """The driver ``kind`` (:data:`~hbmp_bench.envs.drivers.DRIVERS`) for one vehicle."""
@@ -115,7 +117,9 @@ class DrivingWorld:
         return observations, infos
 
     def long_route(self, rng: np.random.Generator, edge: str) -> list[str]:
-        """A chain of random legs from ``edge``, at least ``config.background_route_m`` long."""
+        """A chain of random legs from ``edge``, at least ``config.background_route_m`` long, or up to
+        an edge from which no link a car can drive leads on (routes take no link sharper than
+        ``SHARPEST_TURN_RADIUS_M``, which leaves dead ends in real towns: CARLA's Town07 has 3-5)."""
         route, total = [edge], 0.0
         edges = self.net.drivable_edges
         while total < self.config.background_route_m:
@@ -124,6 +128,8 @@ class DrivingWorld:
                 continue
             dist, prev = self.net.shortest_tree(route[-1])
             if target not in dist:
+                if len(dist) == 1:  # a dead end: nothing else is reachable
+                    break
                 continue
             route.extend(self.net.path_to(prev, route[-1], target)[1:])
             total += dist[target]
@@ -133,7 +139,8 @@ class DrivingWorld:
         """Insert the episode's background vehicles and pedestrians; returns the routes of the
         controlled ones (handed over, tracked and standing)."""
         traffic = self.episode.traffic
-        edges = [e for e in self.net.drivable_edges if e != ego_edge and self.net.edge_length[e] > 15.0]
+        edges = [e for e in self.net.drivable_edges if e != ego_edge and self.net.edge_length[e] > 15.0
+                 and self.net.successors(e)]
         taken: dict[str, list[float]] = {}
         routes: dict[str, tuple[str, ...]] = {}
         for k in range(traffic.vehicles):
@@ -155,12 +162,15 @@ class DrivingWorld:
                 self.sim.track_lane(f"bg{k}")
                 self.sim.set_speed(f"bg{k}", 0.0)
         walkable = self.net.walkable_edges
+        pedestrians = 0
         for k in range(traffic.pedestrians if walkable else 0):
             path = [walkable[int(rng.integers(len(walkable)))] for _ in range(5)]
             walks = [(a, b) for a, b in zip(path[:-1], path[1:]) if a != b and self.sim.walk_route_exists(a, b)]
             if walks:
                 self.sim.add_pedestrian(f"ped{k}", path[0], float(rng.uniform(1.0, self.net.edge_length[path[0]] - 1.0)),
                                         walks)
+                pedestrians += 1
+        self.spawned = (traffic.vehicles, pedestrians)
         return routes
 
     # ------------------------------------------------------------------ step
@@ -239,7 +249,7 @@ class DrivingWorld:
         return ego.route.score.record(
             EpisodeId(ep.suite, ep.town, ep.task, ep.index, ep.seed, self.config.fidelity, ep.route_length_m),
             agent=agent, package_version=__version__, totals=ego.detector.totals, success=ego.end_reason == "goal",
-            end_reason=ego.end_reason, duration_s=self.sim.time, decisions=ego.decisions)
+            end_reason=ego.end_reason, duration_s=self.sim.time, decisions=ego.decisions, traffic=self.spawned)
 
     def close(self) -> None:
         self.sim.close()

@@ -33,14 +33,14 @@ import re
 import shutil
 import tempfile
 import xml.etree.ElementTree as ET
+import xml.parsers.expat
 from pathlib import Path
 
 from ..errors import UnknownNameError, UserError
-from .lanetypes import lane_patches, patch_xml, typemap_xml
+from .lanetypes import allows, lane_patches, patch_xml, typemap_xml
 from .netconvert import netconvert_version, run_netconvert
 from .registry import INFO_SUFFIX, NET_SUFFIX, file_sha256, info_path, user_maps, user_maps_dir
 from .signals import ALL_RED_TIME_S, CROSSING_CLEARANCE_S, retime_yellows
-from .stats import allows
 from .towns import TOWNS
 
 XODR_OPTIONS: tuple[str, ...] = (
@@ -82,7 +82,6 @@ LIGHTS = ("source", "lawful")
 """Light programs of an import: the map's own, or the benchmark's lawful ones."""
 
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,63}$")
-_DOCTYPE = re.compile(rb"<!DOCTYPE|<!ENTITY", re.I)
 
 
 def _check_name(name: str) -> None:
@@ -101,7 +100,7 @@ def validate_net(path: Path, source: str | None = None) -> None:
 
         net = sumolib.net.readNet(str(path), withInternal=True, withPedestrianConnections=True)
     except Exception as exc:  # sumolib raises a mix of SAX, KeyError, ValueError
-        raise UserError(f"{label} is not a readable SUMO net: {exc}") from exc
+        raise UserError(f"{label} is not a readable SUMO net: {str(exc).replace(str(path), label)}") from exc
     edges = net.getEdges(withInternal=False)
     if not edges:
         raise UserError(f"{label} has no edges")
@@ -109,22 +108,39 @@ def validate_net(path: Path, source: str | None = None) -> None:
         raise UserError(f"{label} has no lane a car may drive (no driving lane)")
 
 
+class _RootFound(Exception):
+    """Raised by the prolog check's handler at the first element (its name)."""
+
+
 def _quick_xml_check(path: Path, root_tag: str, label: str) -> None:
-    """Well-formed start, the right root element, no DTD (entity expansion): before netconvert or
-    sumolib reads the file."""
-    with open(path, "rb") as f:
-        head = f.read(4096)
-    if _DOCTYPE.search(head):
+    """Before netconvert or sumolib read the file: it holds an XML element, the right root element,
+    and no document type declaration (entity expansion) anywhere before it. Reads up to the root
+    element's start."""
+    parser = xml.parsers.expat.ParserCreate()
+
+    def doctype(*_args) -> None:
         raise UserError(f"{label}: document type declarations are not accepted in a map file")
+
+    def start(name: str, _attrs) -> None:
+        raise _RootFound(name)
+
+    parser.StartDoctypeDeclHandler = doctype
+    parser.StartElementHandler = start
     try:
-        for _event, elem in ET.iterparse(path, events=("start",)):
-            tag = elem.tag.rsplit("}", 1)[-1]
-            if tag != root_tag:
-                raise UserError(f"{label}: root element is <{tag}>, not <{root_tag}>")
-            return
-    except ET.ParseError as exc:
-        raise UserError(f"{label} is not well-formed XML: {exc}") from exc
-    raise UserError(f"{label} is empty")
+        with open(path, "rb") as f:
+            while chunk := f.read(1 << 16):
+                parser.Parse(chunk, False)
+            parser.Parse(b"", True)
+    except _RootFound as found:
+        tag = found.args[0].rsplit(":", 1)[-1]
+        if tag != root_tag:
+            raise UserError(f"{label}: root element is <{tag}>, not <{root_tag}>") from None
+        return
+    except xml.parsers.expat.ExpatError as exc:
+        if exc.code == xml.parsers.expat.errors.codes[xml.parsers.expat.errors.XML_ERROR_NO_ELEMENTS]:
+            raise UserError(f"{label} is empty (no XML element)") from None
+        raise UserError(f"{label} is not well-formed XML: {exc}") from None
+    raise UserError(f"{label} is empty (no XML element)")  # pragma: no cover - expat raises first
 
 
 def _netconvert(args: list[str], cwd: Path, label: str, what: str) -> None:

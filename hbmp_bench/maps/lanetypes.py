@@ -19,7 +19,6 @@ from __future__ import annotations
 import xml.etree.ElementTree as ET
 from xml.sax.saxutils import quoteattr
 
-from .stats import allows
 
 CAR_CLASSES_DISALLOWED = ("pedestrian rail rail_urban rail_electric rail_fast tram drone aircraft scooter "
                           "container wheelchair subway cable_car ship")
@@ -47,6 +46,19 @@ CLOSED_LANE_TYPES: tuple[str, ...] = ("parking", "bidirectional", "shoulder", "s
 """OpenDRIVE lane types kept in the net and closed to every class (``disallow="all"``)."""
 
 _DEFAULT_SPEED = {"sidewalk": 2.78, "walking": 2.78, "biking": 5.56}
+
+
+def allows(lane: ET.Element, vclass: str) -> bool:
+    """Whether a ``<lane>`` element's allow/disallow attributes admit ``vclass``."""
+    allow = lane.get("allow")
+    if allow is not None:
+        classes = allow.split()
+        return vclass in classes or "all" in classes
+    disallow = lane.get("disallow")
+    if disallow is not None:
+        classes = disallow.split()
+        return vclass not in classes and "all" not in classes
+    return True
 
 
 def permissions(lane_type: str) -> dict[str, str] | None:
@@ -90,6 +102,19 @@ def lane_type(lane: ET.Element, edge: ET.Element) -> str:
     return parts[0]
 
 
+def closed_to_cars(kind: str) -> bool:
+    """Whether the benchmark closes lanes of OpenDRIVE type ``kind`` to cars (a known type that is no
+    car lane; an unknown type is left as its net has it)."""
+    return permissions(kind) is not None and kind not in CAR_LANE_TYPES
+
+
+def is_car_lane(lane: ET.Element, edge: ET.Element) -> bool:
+    """Whether a ``<lane>`` of ``<edge>`` carries cars in the benchmark: it allows ``passenger`` and its
+    type is not one the benchmark closes (a SUMO net made by netconvert's default type map, as CARLA's
+    own, leaves parking and bidirectional lanes open to cars: an import closes them, :func:`lane_patches`)."""
+    return allows(lane, "passenger") and not closed_to_cars(lane_type(lane, edge))
+
+
 def lane_patches(root: ET.Element) -> list[tuple[str, int, str, dict[str, str]]]:
     """The lanes of a net's normal edges that are open to cars although their type is not a car
     lane: (edge id, lane index, lane type, the type's :func:`permissions`)."""
@@ -99,9 +124,8 @@ def lane_patches(root: ET.Element) -> list[tuple[str, int, str, dict[str, str]]]
             continue
         for lane in edge.findall("lane"):
             kind = lane_type(lane, edge)
-            wanted = permissions(kind)
-            if wanted is not None and kind not in CAR_LANE_TYPES and allows(lane, "passenger"):
-                out.append((edge.get("id"), int(lane.get("index", "0")), kind, wanted))
+            if closed_to_cars(kind) and allows(lane, "passenger"):
+                out.append((edge.get("id"), int(lane.get("index", "0")), kind, permissions(kind)))
     return out
 
 

@@ -376,15 +376,44 @@ class RoadNetwork:
         many lane changes of a lane the last link lands on (of the start lane, for a one-edge route) as the
         ``goal_pos`` [m] of room allows, one change taking ``max(change_m, change_s * speed limit)`` [m] as
         in :meth:`route_lanes` (from the start, ``change_m``: the car starts slowly)."""
+        entries = [start_lane] if len(route) == 1 else [c.to_lane for c in self.links(route[-2], route[-1])]
+        return self._goal_lanes(route, entries, goal_pos, start_pos, change_m, change_s) or tuple(entries[:1])
+
+    def _goal_lanes(self, route: tuple[str, ...], entries, goal_pos: float, start_pos: float, change_m: float,
+                    change_s: float) -> tuple[str, ...]:
+        """Lanes of the route's last edge within reach of a car entering it in one of ``entries`` (see
+        :meth:`reachable_goal_lanes`)."""
         goal_edge = route[-1]
         if len(route) == 1:
-            entries, room, per_change = [start_lane], goal_pos - start_pos, change_m
+            room, per_change = goal_pos - start_pos, change_m
         else:
-            entries = [c.to_lane for c in self.links(route[-2], goal_edge)]
             room, per_change = goal_pos, max(change_m, change_s * self.lanes[self.edge_lanes[goal_edge][0]].speed)
         landings = frozenset(entries)
         return tuple(lane for lane in self.edge_lanes[goal_edge]
-                     if self.changes_into(lane, landings) * per_change <= max(room, 0.0)) or tuple(entries[:1])
+                     if self.changes_into(lane, landings) * per_change <= max(room, 0.0))
+
+    def route_drivable(self, route: tuple[str, ...], start_lane: str, start_pos: float, goal_lane: str,
+                       goal_pos: float, cutoff_m: float = LANE_CHANGE_CUTOFF_M, change_m: float = 20.0,
+                       change_s: float = 3.0) -> bool:
+        """Whether a car in ``start_lane`` at ``start_pos`` [m] can follow ``route`` and be in ``goal_lane`` at
+        ``goal_pos`` [m]. Before the last edge it changes lanes only where a lane change may begin, on an edge
+        with more than ``cutoff_m`` [m] of it ahead (the action mask's rule, ``LANE_CHANGE_CUTOFF_M``), and
+        optimistically any number of times there; on the last edge it reaches the goal lane from where it
+        enters with the room :meth:`reachable_goal_lanes` gives its changes (how the goal lane was chosen).
+
+        False when a lane the car is confined to has no link onto the route's next edge (an edge
+        shorter than the cutoff, as real towns have where a road splits, leaves no room to reach a
+        turn's lane) or the goal lane is out of reach of the lanes it can enter the last edge by.
+        """
+        reach, pos = frozenset({start_lane}), float(start_pos)
+        for k, edge in enumerate(route[:-1]):
+            if self.edge_length[edge] - pos > cutoff_m:
+                reach = frozenset(self.edge_lanes[edge])
+            reach = frozenset(c.to_lane for c in self.links(edge, route[k + 1]) if c.from_lane in reach)
+            if not reach:
+                return False
+            pos = 0.0
+        return goal_lane in self._goal_lanes(tuple(route), reach, goal_pos, start_pos, change_m, change_s)
 
     @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
     def _route_lanes(self, route: tuple[str, ...], goal_lane: str, goal_pos: float | None, change_m: float,

@@ -106,9 +106,11 @@ class EpisodeScorer:
         return float(np.clip(self.progress_m / max(self.route_length_m, 1e-6), 0.0, 1.0))
 
     def record(self, episode: EpisodeId, *, agent: str, package_version: str, totals: dict[str, int], success: bool,
-               end_reason: str, duration_s: float, decisions: int, completion: float | None = None) -> EpisodeRecord:
+               end_reason: str, duration_s: float, decisions: int, completion: float | None = None,
+               traffic: tuple[int, int] = (-1, -1)) -> EpisodeRecord:
         """The episode record now (final once the episode has ended); ``completion`` overrides
-        :meth:`completion` (e.g. a scene without a goal, scored by time survived)."""
+        :meth:`completion` (e.g. a scene without a goal, scored by time survived); ``traffic``: the
+        (vehicles, pedestrians) that spawned."""
         completion = self.completion(success) if completion is None else completion
         return EpisodeRecord(
             suite=episode.suite, town=episode.town, task=episode.task, episode=episode.episode, seed=episode.seed,
@@ -121,4 +123,5 @@ class EpisodeScorer:
             timeout=end_reason == "timeout", duration_s=round(duration_s, 2), distance_m=round(self.distance_m, 2),
             route_length_m=episode.route_length_m, decisions=decisions,
             driving_score=round(driving_score(completion, totals), 3), end_reason=end_reason or "running",
+            traffic_vehicles=int(traffic[0]), traffic_pedestrians=int(traffic[1]),
         )

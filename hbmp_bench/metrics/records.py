@@ -41,6 +41,10 @@ class EpisodeRecord:
     Distances in [m], durations in [s], counts are events (one per entry). ``end_reason`` is the
     world's (``goal``, ``timeout``, ``collision``, ``violation``, ``left_network``) or one of
     ``END_REASON_ERRORS`` set by the evaluation runner, with the reason in ``error``.
+    ``traffic_vehicles`` / ``traffic_pedestrians``: the background vehicles and pedestrians put into
+    the simulation at the episode's start (SUMO inserts a vehicle whose place is taken as soon as it is
+    free; a pedestrian without a walk between its edges is left out: what spawned, not what the episode
+    asked for). -1: not recorded (an error record, the highway-env transfer, a record older than the field).
     """
 
     suite: str
@@ -67,6 +71,8 @@ class EpisodeRecord:
     driving_score: float
     end_reason: str
     error: str = ""
+    traffic_vehicles: int = -1
+    traffic_pedestrians: int = -1
 
     @property
     def collisions(self) -> int:

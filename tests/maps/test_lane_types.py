@@ -11,11 +11,10 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from hbmp_bench.maps import import_map, map_info, map_stats, net_path
-from hbmp_bench.maps.lanetypes import CAR_LANE_TYPES, lane_type
+from hbmp_bench.maps import import_map, map_info, map_stats, net_path, net_stats
+from hbmp_bench.maps.lanetypes import CAR_LANE_TYPES, allows, lane_type
 from hbmp_bench.maps.netconvert import run_netconvert
 from hbmp_bench.maps.roadnet import RoadNetwork
-from hbmp_bench.maps.stats import allows
 
 OTHER_TYPES = ("parking", "shoulder", "sidewalk", "biking", "bidirectional", "stop", "restricted", "median",
                "border", "curb", "none")
@@ -119,6 +118,11 @@ def test_net_xml_with_parking_and_bidirectional_lanes_open_to_cars_is_mended(tmp
     _check_permissions(net_path("mended"), ("driving", "parking", "bidirectional"))
     assert map_info("mended")["lanes_closed"] == {"bidirectional": 1, "parking": 1}  # one of each per road side
     assert map_stats("mended")["lanes_per_edge"] == {"1": 2}
+    # the raw net's statistics count its car lanes as the import leaves them (what CARLA's own net is compared by)
+    raw_stats = net_stats(raw)
+    for key in ("lanes_per_edge", "lanes_per_edge_mean", "drivable_edges"):
+        assert raw_stats[key] == map_stats("mended")[key], key
+    assert raw_stats["lanes_per_edge_mean"] == 1.0
 
 
 def test_sidewalks_are_guessed_only_where_the_map_has_none(tmp_path):

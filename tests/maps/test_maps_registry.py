@@ -178,8 +178,28 @@ def test_hostile_and_truncated_files_fail_naming_the_file(tmp_path):
     truncated_net.write_text(text[: len(text) // 2], encoding="utf-8")
     binary = tmp_path / "noise.xodr"
     binary.write_bytes(bytes(range(256)) * 8)
-    for src in (bomb, truncated_xodr, truncated_net, binary):
+    # a declaration after a long comment, and a net that sumolib would read (its entities expanded)
+    padding = "<!--" + "x" * 5000 + "-->\n"
+    late_bomb = tmp_path / "late.xodr"
+    late_bomb.write_text('<?xml version="1.0"?>' + padding + '<!DOCTYPE OpenDRIVE [<!ENTITY a "aaaa">]>'
+                         + XODR[XODR.index("<OpenDRIVE>"):], encoding="utf-8")
+    late_net = tmp_path / "late.net.xml"
+    late_net.write_text(padding + '<!DOCTYPE net [<!ENTITY a "aaaa">]>' + text[text.index("<net "):], encoding="utf-8")
+    empty_xodr, empty_net, blank = tmp_path / "empty.xodr", tmp_path / "empty.net.xml", tmp_path / "blank.xodr"
+    empty_xodr.write_bytes(b"")
+    empty_net.write_bytes(b"")
+    blank.write_text("  \n", encoding="utf-8")
+    not_xml = tmp_path / "words.net.xml"
+    not_xml.write_text("hello, not a net", encoding="utf-8")
+    wrong = tmp_path / "town.xml"
+    wrong.write_text(XODR, encoding="utf-8")
+    cases = {bomb: "document type", late_bomb: "document type", late_net: "document type", truncated_xodr: "",
+             truncated_net: "", binary: "", empty_xodr: "is empty", empty_net: "is empty", blank: "is empty",
+             not_xml: "not well-formed", wrong: ".xodr or a SUMO .net.xml"}
+    for src, says in cases.items():
         with pytest.raises(ValueError) as info:
             import_map(src, "bad")
-        assert src.name in str(info.value)
+        message = str(info.value)
+        assert src.name in message and says in message, message
+        assert "input.net.xml" not in message and "hbmp_import_" not in message, message  # no staged copy named
     assert _user_files() == []

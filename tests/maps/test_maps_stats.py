@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from hbmp_bench.maps import TOWNS, map_stats
+from hbmp_bench.maps.stats import format_stats
 
 # The spec: directed road length (m), {vehicle lanes per edge: edges}, TLS / priority
 # junctions, extent (x, y) in m. Length, junction counts and extent must lie within
@@ -117,3 +118,17 @@ def test_town04_highway_loop(nets):
     ids = {e.getID() for e in highway}
     nxt = {e.getID(): [o.getID() for o in e.getOutgoing() if o.getID() in ids] for e in highway}
     assert all(len(v) == 1 for v in nxt.values())
+
+
+def test_format_stats_sets_maps_side_by_side():
+    stats = {"Town02": map_stats("Town02"), "Town01": map_stats("Town01")}
+    lines = format_stats(stats).splitlines()
+    assert lines[0].split() == ["Town02", "Town01"]
+    rows = {line.split()[0]: line.split()[1:] for line in lines[1:]}
+    assert set(rows) == set(stats["Town02"])
+    a, b = stats["Town02"]["directed_road_length_m"], stats["Town01"]["directed_road_length_m"]
+    assert rows["directed_road_length_m"] == [f"{a:g}", f"{b:g}", f"({100 * (b - a) / a:+.1f}%)"]
+    w, h = stats["Town01"]["extent_m"]
+    assert " ".join(rows["extent_m"]).endswith(f"{w:g} x {h:g}")
+    mean = stats["Town01"]["lanes_per_edge_mean"]
+    assert mean == pytest.approx(stats["Town01"]["driving_lane_length_m"] / b, abs=1e-3)

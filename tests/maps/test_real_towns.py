@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from hbmp_bench.maps import import_map, map_stats, net_path
+from hbmp_bench.maps import import_map, map_stats, net_path, net_stats
 from hbmp_bench.maps.lanetypes import CAR_LANE_TYPES, lane_type
 from hbmp_bench.maps.signals import ALL_RED_TIME_S, read_programs, yellow_time
 from hbmp_bench.scenarios import SUITES, TASKS, road_network, suite_episodes
@@ -52,10 +52,11 @@ def test_xodr_import_matches_carlas_own_net(town):
     if "net" not in stats:
         return
     carla = stats["net"]
-    assert xodr["directed_road_length_m"] == pytest.approx(carla["directed_road_length_m"], rel=0.05)
-    lanes_x = xodr["driving_lane_length_m"] / xodr["directed_road_length_m"]
-    lanes_c = carla["driving_lane_length_m"] / carla["directed_road_length_m"]
-    assert lanes_x == pytest.approx(lanes_c, rel=0.05)  # lanes per edge, weighted by length
+    own = net_stats(CARLA_DIR / f"{town}.net.xml")  # CARLA's net as it is (its car lanes as an import leaves them)
+    for other in (carla, own):
+        assert xodr["directed_road_length_m"] == pytest.approx(other["directed_road_length_m"], rel=0.05)
+        assert xodr["driving_lane_length_m"] == pytest.approx(other["driving_lane_length_m"], rel=0.05)
+        assert xodr["lanes_per_edge_mean"] == pytest.approx(other["lanes_per_edge_mean"], rel=0.05)
     source_lights = _source_lights(CARLA_DIR / f"{town}.net.xml")
     assert xodr["tls_junctions"] == carla["tls_junctions"] == source_lights
     assert carla["import"]["source_tls"] == source_lights and carla["walkable_edges"] > 0
@@ -63,6 +64,8 @@ def test_xodr_import_matches_carlas_own_net(town):
 
 @pytest.mark.parametrize("town", REAL_TOWNS or ["none"])
 def test_every_episode_of_every_suite_starts_and_ends_on_a_driving_lane(town):
+    """...and its route can be driven from the start lane to the goal lane (Town10HD's short split edges left
+    43 of 335 episodes (.xodr) starting in a lane that had to leave the route or arrive beside the goal)."""
     for kind, src in _sources(town):
         name = f"{town}_{kind}"
         import_map(src, name)
@@ -77,6 +80,7 @@ def test_every_episode_of_every_suite_starts_and_ends_on_a_driving_lane(town):
                         assert types[lane] in CAR_LANE_TYPES, (suite.name, ep.key, lane, types[lane])
                         assert net.edge_length[edge] > ep.success_radius_m
                         assert net.lanes[lane].speed >= MIN_ROUTE_SPEED_MPS
+                    assert net.route_drivable(ep.route, ep.start_lane, ep.start_pos, ep.goal_lane, ep.goal_pos), ep.key
                     if task == "NavigationDynamic" and suite.density is None:
                         assert ep.traffic.pedestrians > 0 and ep.traffic.vehicles > 0
 
@@ -109,3 +113,20 @@ def test_like_borrows_a_built_in_towns_task_parameters():
     assert 0.5 * 360 <= sum(like_nav) / len(like_nav) <= 1.5 * 360  # CoRL2017's Town02 band
     assert own_nav != like_nav
     assert TASKS[-1] == "NavigationDynamic"
+
+
+@pytest.mark.parametrize("town", REAL_TOWNS or ["none"])
+def test_dynamic_episodes_start_with_their_traffic(town):
+    """Every source's NavigationDynamic episodes start with what they ask for (Town07's dead ends once hung
+    the background routes; CARLA's own net has no walkable edge until the import guesses sidewalks)."""
+    from hbmp_bench.envs import BehaviorEnv
+
+    for kind, src in _sources(town):
+        import_map(src, f"{town}_{kind}")
+        env = BehaviorEnv(town=f"{town}_{kind}", task="NavigationDynamic", fidelity="event")
+        for index in range(3):
+            env.reset(seed=index, options={"episode_index": index})
+            record, asked = env.record(), env.episodes[index].traffic
+            assert asked.pedestrians > 0
+            assert (record.traffic_vehicles, record.traffic_pedestrians) == (asked.vehicles, asked.pedestrians)
+        env.close()

@@ -5,7 +5,8 @@ import pytest
 import sumolib
 
 from hbmp_bench.maps import net_path
-from hbmp_bench.maps.roadnet import point_along, project_on_polyline
+from hbmp_bench.maps.netconvert import run_netconvert
+from hbmp_bench.maps.roadnet import LANE_CHANGE_CUTOFF_M, RoadNetwork, point_along, project_on_polyline
 from hbmp_bench.scenarios import road_network, suite_episodes
 
 
@@ -195,3 +196,48 @@ def test_start_lanes_reach_the_route_lanes():
     long_edge = max(net.edge_lanes, key=lambda e: net.edge_length[e] if len(net.edge_lanes[e]) > 1 else 0)
     nxt = net.successors(long_edge)[0]
     assert net.reachable_start_lanes((long_edge, nxt), 1.0, 10.0) == net.edge_lanes[long_edge]
+
+
+def _split_then_turn_net(tmp_path) -> RoadNetwork:
+    """A two-lane road (``long``, 100 m) split by a plain node from a short piece (``short``, 8 m) before a
+    junction where only the left lane turns left (``left``) and only the right lane goes on (``on``)."""
+    (tmp_path / "n.nod.xml").write_text(
+        '<nodes><node id="a" x="0" y="0"/><node id="b" x="100" y="0"/><node id="c" x="108" y="0"/>'
+        '<node id="d" x="208" y="0"/><node id="e" x="108" y="100"/></nodes>', encoding="utf-8")
+    (tmp_path / "n.edg.xml").write_text(
+        '<edges><edge id="long" from="a" to="b" numLanes="2" speed="13.89"/>'
+        '<edge id="short" from="b" to="c" numLanes="2" speed="13.89"/>'
+        '<edge id="left" from="c" to="e" numLanes="1" speed="13.89"/>'
+        '<edge id="on" from="c" to="d" numLanes="1" speed="13.89"/></edges>', encoding="utf-8")
+    (tmp_path / "n.con.xml").write_text(
+        '<connections><connection from="long" to="short" fromLane="0" toLane="0"/>'
+        '<connection from="long" to="short" fromLane="1" toLane="1"/>'
+        '<connection from="short" to="left" fromLane="1" toLane="0"/>'
+        '<connection from="short" to="on" fromLane="0" toLane="0"/></connections>', encoding="utf-8")
+    run_netconvert(["-n", "n.nod.xml", "-e", "n.edg.xml", "-x", "n.con.xml", "-o", "n.net.xml"], cwd=tmp_path)
+    return RoadNetwork(tmp_path / "n.net.xml")
+
+
+def test_route_drivable_needs_room_to_reach_the_turn_lane(tmp_path):
+    """Real towns split roads into pieces shorter than the lane-change cutoff just before a junction
+    (CARLA Town10HD: 16 of 46 edges): a car on such a piece in a lane without a link onto the route's
+    next edge can only leave the route."""
+    net = _split_then_turn_net(tmp_path)
+    assert net.edge_length["short"] < LANE_CHANGE_CUTOFF_M < net.edge_length["long"] - 20.0
+    route = ("long", "short", "left")
+    goal = net.edge_lanes["left"][0]
+    right, left = net.edge_lanes["long"]
+    assert net.route_drivable(route, right, 5.0, goal, 50.0)  # changes lanes on the long piece
+    assert net.route_drivable(route, left, 95.0, goal, 50.0)  # already in the turn's lane
+    assert not net.route_drivable(route, right, net.edge_length["long"] - 5.0, goal, 50.0)  # too late to change
+    assert not net.route_drivable(route[1:], net.edge_lanes["short"][0], 1.0, goal, 50.0)
+    assert net.route_drivable(route[1:], net.edge_lanes["short"][1], 1.0, goal, 50.0)
+    # a goal on the short piece lies in the lane the car enters it by: no room to change there
+    short_right, short_left = net.edge_lanes["short"]
+    late = net.edge_length["long"] - 5.0
+    assert net.route_drivable(route[:2], right, 5.0, short_left, 4.0)
+    assert not net.route_drivable(route[:2], right, late, short_left, 4.0)
+    assert net.route_drivable(route[:2], right, late, short_right, 4.0)
+    # the goal lane: reached by a change on the goal edge before the goal, not after it
+    assert net.route_drivable(("long",), right, 5.0, left, 60.0)
+    assert not net.route_drivable(("long",), right, 5.0, left, 4.0)
