@@ -28,6 +28,11 @@ junction (solid lines in real towns); a change begun there would enter the junct
 lane's connection."""
 
 
+LANE_CHANGE_BEGIN_M = 5.0
+"""Room [m] before ``LANE_CHANGE_CUTOFF_M`` a lane change needs to begin in (``RoadNetwork.route_drivable``):
+Town03's 12.5 m edges behind a junction leave a car 2.5 m; routes that needed a change there looped the
+expert round the block until it timed out."""
+
 SHARPEST_TURN_RADIUS_M = 3.0
 """Routes take no junction link that turns tighter than this radius [m] (``sharpest_turn_radius`` of its
 centreline). The ego's bicycle model turns no tighter than wheelbase / tan(max_steer) = 4.1 m; cutting
@@ -394,10 +399,11 @@ class RoadNetwork:
 
     def route_drivable(self, route: tuple[str, ...], start_lane: str, start_pos: float, goal_lane: str,
                        goal_pos: float, cutoff_m: float = LANE_CHANGE_CUTOFF_M, change_m: float = 20.0,
-                       change_s: float = 3.0) -> bool:
+                       change_s: float = 3.0, begin_m: float = LANE_CHANGE_BEGIN_M) -> bool:
         """Whether a car in ``start_lane`` at ``start_pos`` [m] can follow ``route`` and be in ``goal_lane`` at
-        ``goal_pos`` [m]. Before the last edge it changes lanes only where a lane change may begin, on an edge
-        with more than ``cutoff_m`` [m] of it ahead (the action mask's rule, ``LANE_CHANGE_CUTOFF_M``), and
+        ``goal_pos`` [m]. Before the last edge it changes lanes only where a lane change can begin, on an edge
+        with more than ``cutoff_m + begin_m`` [m] of it ahead (the action mask closes changes ``cutoff_m``
+        before the junction, ``LANE_CHANGE_CUTOFF_M``, and a change needs ``begin_m`` to begin), and
         optimistically any number of times there; on the last edge it reaches the goal lane from where it
         enters with the room :meth:`reachable_goal_lanes` gives its changes (how the goal lane was chosen).
 
@@ -407,7 +413,7 @@ class RoadNetwork:
         """
         reach, pos = frozenset({start_lane}), float(start_pos)
         for k, edge in enumerate(route[:-1]):
-            if self.edge_length[edge] - pos > cutoff_m:
+            if self.edge_length[edge] - pos > cutoff_m + begin_m:
                 reach = frozenset(self.edge_lanes[edge])
             reach = frozenset(c.to_lane for c in self.links(edge, route[k + 1]) if c.from_lane in reach)
             if not reach:

@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, field
 TASKS: tuple[str, ...] = ("Straight", "OneTurn", "Navigation", "NavigationDynamic")
 """The CoRL2017 task categories, as used in env ids (``hbmp_bench/Town01-OneTurn-v0``)."""
 
-EPISODE_RULES_VERSION = 8
+EPISODE_RULES_VERSION = 9
 """Version of how a suite's episodes are drawn and measured, part of ``Suite.definition_hash`` so
 that records and leaderboard results of older episode lists never mix with current ones. Bump it
 whenever the episode lists or their route lengths / timeouts change. 2: route length is the length
@@ -26,7 +26,10 @@ was always the rightmost, which in Town03 and Town05 lay 1-2 lanes from where th
 before the goal. 8: routes take no junction link sharper than a 3 m radius (``SHARPEST_TURN_RADIUS_M``: Town04's
 ramp terminals had 135-degree turns within 13 m, Town03 and Town05 a few 2.5 m ones), and the start lane is one
 from which the route can be followed (``RoadNetwork.reachable_start_lanes``: Town03 had starts 6-8 m before a
-junction, a lane or two from the only lane that continues, and the ego looped the block until it timed out)."""
+junction, a lane or two from the only lane that continues, and the ego looped the block until it timed out).
+9: poses the route cannot be driven from are drawn again (``RoadNetwork.route_drivable``), a lane change needing
+``LANE_CHANGE_BEGIN_M`` (5 m) of an edge before the lane-change cutoff: Town03 routes that needed a change on a
+12.5 m edge behind a junction (hbmp Navigation 19 and 23; the lists after them in those tasks move on)."""
 
 TASK_LABELS = {
     "Straight": "Straight",

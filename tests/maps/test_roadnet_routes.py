@@ -241,3 +241,16 @@ def test_route_drivable_needs_room_to_reach_the_turn_lane(tmp_path):
     # the goal lane: reached by a change on the goal edge before the goal, not after it
     assert net.route_drivable(("long",), right, 5.0, left, 60.0)
     assert not net.route_drivable(("long",), right, 5.0, left, 4.0)
+
+
+def test_a_lane_change_needs_room_to_begin_before_the_cutoff():
+    """Town03: ``Pl130_I90_130`` (one lane) lands on the right lane of ``-X90_95_I90_130``, a 12.5 m edge whose
+    left lane alone turns onto ``X90_95_I125_95``: 2.5 m before the lane-change cutoff is no room to begin a
+    change (the expert looped the block there until it timed out), so the route is not drivable; joining the
+    12.5 m edge in its left lane it is."""
+    net = road_network("Town03")
+    route = ("Pl130_I90_130", "-X90_95_I90_130", "X90_95_I125_95")
+    goal = "X90_95_I125_95_3"  # where the turn lands: no room for a change before a goal 8 m in
+    assert not net.route_drivable(route, "Pl130_I90_130_1", 5.0, goal, 8.0)
+    assert net.route_drivable(route[1:], "-X90_95_I90_130_2", 0.5, goal, 8.0)
+    assert net.route_drivable(route, "Pl130_I90_130_1", 5.0, goal, 8.0, begin_m=0.0)  # the old rule's answer
