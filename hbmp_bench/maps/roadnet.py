@@ -29,9 +29,9 @@ lane's connection."""
 
 
 LANE_CHANGE_BEGIN_M = 5.0
-"""Room [m] before ``LANE_CHANGE_CUTOFF_M`` a lane change needs to begin in (``RoadNetwork.route_drivable``):
-Town03's 12.5 m edges behind a junction leave a car 2.5 m; routes that needed a change there looped the
-expert round the block until it timed out."""
+"""Room [m] before ``LANE_CHANGE_CUTOFF_M`` each lane change needs to begin in (``RoadNetwork.route_drivable``):
+Town03's 12.5 m edges behind a junction leave a car 2.5 m, its 16 m ones 6 m (one change, not two); routes that
+needed more looped the expert round the block until it timed out."""
 
 SHARPEST_TURN_RADIUS_M = 3.0
 """Routes take no junction link that turns tighter than this radius [m] (``sharpest_turn_radius`` of its
@@ -401,11 +401,11 @@ class RoadNetwork:
                        goal_pos: float, cutoff_m: float = LANE_CHANGE_CUTOFF_M, change_m: float = 20.0,
                        change_s: float = 3.0, begin_m: float = LANE_CHANGE_BEGIN_M) -> bool:
         """Whether a car in ``start_lane`` at ``start_pos`` [m] can follow ``route`` and be in ``goal_lane`` at
-        ``goal_pos`` [m]. Before the last edge it changes lanes only where a lane change can begin, on an edge
-        with more than ``cutoff_m + begin_m`` [m] of it ahead (the action mask closes changes ``cutoff_m``
-        before the junction, ``LANE_CHANGE_CUTOFF_M``, and a change needs ``begin_m`` to begin), and
-        optimistically any number of times there; on the last edge it reaches the goal lane from where it
-        enters with the room :meth:`reachable_goal_lanes` gives its changes (how the goal lane was chosen).
+        ``goal_pos`` [m]. Before the last edge it changes lanes only before the action mask closes changes
+        (``cutoff_m`` before the junction, ``LANE_CHANGE_CUTOFF_M``), optimistically one change per ``begin_m``
+        [m] of the edge ahead of that (``LANE_CHANGE_BEGIN_M``); on the last edge it reaches the goal lane from
+        where it enters with the room :meth:`reachable_goal_lanes` gives its changes (how the goal lane was
+        chosen).
 
         False when a lane the car is confined to has no link onto the route's next edge (an edge
         shorter than the cutoff, as real towns have where a road splits, leaves no room to reach a
@@ -413,8 +413,9 @@ class RoadNetwork:
         """
         reach, pos = frozenset({start_lane}), float(start_pos)
         for k, edge in enumerate(route[:-1]):
-            if self.edge_length[edge] - pos > cutoff_m + begin_m:
-                reach = frozenset(self.edge_lanes[edge])
+            changes = int(max(self.edge_length[edge] - pos - cutoff_m, 0.0) // begin_m) if begin_m > 0 else len(self.lanes)
+            if changes:
+                reach = frozenset(lane for lane in self.edge_lanes[edge] if self.changes_into(lane, reach) <= changes)
             reach = frozenset(c.to_lane for c in self.links(edge, route[k + 1]) if c.from_lane in reach)
             if not reach:
                 return False

@@ -258,8 +258,8 @@ def sample_episode(
     outside the task's band are rejected, and so are poses the route cannot be driven from
     (``RoadNetwork.route_drivable``: a start lane that no lane change can leave before the junction
     where the route turns off it, as on the short edges of real towns' road splits); the band widens
-    step by step if a small map has none. (``route_drivable`` redraws 2 Town03 Navigation episodes per
-    suite of the built-in towns, episode rules 9; CARLA's Town10HD imported: 43 of 335.)
+    step by step if a small map has none. (``route_drivable`` redraws 1-4 Town03 episodes per suite of the
+    built-in towns, episode rules 9 and 10; CARLA's Town10HD imported: 43 of 335 before them.)
     """
     net = road_network(town)
     usable = episode_edges(town, suite.success_radius_m)

@@ -254,3 +254,15 @@ def test_a_lane_change_needs_room_to_begin_before_the_cutoff():
     assert not net.route_drivable(route, "Pl130_I90_130_1", 5.0, goal, 8.0)
     assert net.route_drivable(route[1:], "-X90_95_I90_130_2", 0.5, goal, 8.0)
     assert net.route_drivable(route, "Pl130_I90_130_1", 5.0, goal, 8.0, begin_m=0.0)  # the old rule's answer
+
+
+def test_two_lane_changes_need_room_for_two():
+    """Town03: leaving the roundabout by ``-AS_RS`` lands on the right lane of ``-I125_95_AS`` (16 m, three
+    lanes), whose left lane alone turns onto ``-Pb125_I125_95``: 6 m before the cutoff is room for one change,
+    not the two needed (the expert changed once and went straight on, then looped until it timed out)."""
+    net = road_network("Town03")
+    route = ("-AS_RS", "-I125_95_AS", "-Pb125_I125_95")
+    goal = net.edge_lanes["-Pb125_I125_95"][0]
+    assert not net.route_drivable(route, "-AS_RS_1", 5.0, goal, 30.0)
+    assert net.route_drivable(route[1:], "-I125_95_AS_2", 0.0, goal, 30.0)   # one change: room for it
+    assert not net.route_drivable(route[1:], "-I125_95_AS_1", 0.0, goal, 30.0)
