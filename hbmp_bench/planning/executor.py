@@ -73,6 +73,11 @@ class ReferencePaths(NamedTuple):
     right: Path | None
     corridor: tuple[float, float, float] = NO_CORRIDOR
 
+    @property
+    def paths(self) -> tuple[Path | None, Path, Path | None]:
+        """(left, current, right)."""
+        return self.left, self.current, self.right
+
 
 def target_path(behavior: Behavior | int, refs: ReferencePaths) -> tuple[Behavior, Path]:
     """Effective behavior and its reference path (missing lane -> ``KEEP`` on current)."""
@@ -175,7 +180,7 @@ class BehaviorExecutor:
         refs = ReferencePaths(*refs)
         if refs.current is None:
             raise ValueError("refs.current (the current lane centerline) is required")
-        for p in refs[:3]:
+        for p in refs.paths:
             if p is not None and not isinstance(p, Path):
                 raise ValueError(f"reference paths must be Path or None, got {type(p).__name__}")
         if not (math.isfinite(speed_limit) and speed_limit > 0):

@@ -254,8 +254,8 @@ def _draw_scene(ax, situation: PlannerSituation, plans: dict[Behavior, BehaviorP
     ax.legend(handles=handles, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3, fontsize=7.5,
               frameon=False)
     ax.set_xlim(*x_range)
-    lat = [0.0] + [float(_to_ego(p.xy, ego)[:, 1].min()) for p in situation.refs if p is not None]
-    lat += [float(_to_ego(p.xy, ego)[:, 1].max()) for p in situation.refs if p is not None]
+    lat = [0.0] + [float(_to_ego(p.xy, ego)[:, 1].min()) for p in situation.refs.paths if p is not None]
+    lat += [float(_to_ego(p.xy, ego)[:, 1].max()) for p in situation.refs.paths if p is not None]
     ax.set_ylim(min(lat) - 4.5, max(lat) + 4.5)
     ax.set_aspect(LATERAL_EXAGGERATION)
     ax.set_facecolor("#55634f")
