@@ -732,8 +732,7 @@ def sharpest_turn_radius(shape: np.ndarray, window_m: float = TURN_WINDOW_M, spa
     if k < 1:
         return float("inf")
     turn = float(np.max(np.abs(heading[k:] - heading[:-k])))
-    span = float(s[k] - s[0]) if k < len(s) else float(arc[-1])
-    return span / turn if turn > 1e-9 else float("inf")
+    return k * spacing / turn if turn > 1e-9 else float("inf")
 
 
 def point_along(shape: np.ndarray, pos: float) -> np.ndarray:
