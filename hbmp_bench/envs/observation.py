@@ -14,7 +14,9 @@ R_t (``ROAD_FEATURES``, 10 entries, in the paper's order):
   e_l, e_r       1 if a drivable lane exists left / right of the ego's lane (0 inside a junction)
   a_l, a_c, a_r  1 if the left / current / right lane continues the route (links to the next route
                  edge, and in time for the goal lane: see ``RoadNetwork.route_lanes``; on the goal
-                 edge: is the goal lane); 0 otherwise or if absent
+                 edge: is the goal lane); 0 otherwise or if absent. When no lane next to the ego
+                 continues the route and its own does not either, a_l (a_r) is 1 if the nearest
+                 lane that does lies further left (right): see :func:`route_lane_features`
   l_g, l_y, l_r  one-hot state of the traffic light at the end of the current lane (all 0: none)
   d_s            distance to the stop line (end of the current lane) / lane length, in [0, 1]
   dv             speed / speed limit, clipped to [0, 2]
@@ -119,6 +121,29 @@ def observation_space(config: ObservationConfig):
         occupancy=spaces.Box(0.0, 1.0, (1, config.rows, config.cols), dtype=np.float32),
         road=spaces.Box(0.0, 2.0, (len(config.road_features),), dtype=np.float32),
     )
+
+
+def route_lane_features(here: int, good: frozenset[int], has_left: bool, has_right: bool
+                        ) -> tuple[bool, bool, bool, int]:
+    """R_t's a_l, a_c, a_r and the signed offset to the nearest lane that continues the route.
+
+    Lanes are numbered across the road with +1 one lane to the left. ``good`` are the lanes that
+    continue the route (empty: none known). The paper defines a_l, a_c, a_r as the route direction
+    of the three lanes; a road of four lanes whose route lane is two lanes away leaves all three 0,
+    and a policy cannot tell which way to change (CARLA's Town04 motorways: the shipped ``il``
+    stood still or passed its goal one lane off in 11 of 40 Straight episodes). Here a neighbour
+    that leads towards the nearest route lane counts as continuing the route.
+
+    Returns:
+        (a_l, a_c, a_r, offset): offset in lanes (+ left) to the nearest route lane, 0 when the
+        ego's lane is one or none is known.
+    """
+    offset = 0
+    if here not in good and good:
+        offset = min(good, key=lambda g: (abs(g - here), g)) - here
+    a_l = has_left and (here + 1 in good or offset > 0)
+    a_r = has_right and (here - 1 in good or offset < 0)
+    return a_l, here in good, a_r, offset
 
 
 def road_vector(config: ObservationConfig, paper_road: np.ndarray, stop_distance_m: float,
@@ -306,12 +331,8 @@ def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[s
         left = ids[here + 1] if here + 1 < len(ids) else None
         right = ids[here - 1] if here > 0 else None
         r[0], r[1] = left is not None, right is not None
-        r[2], r[3], r[4] = left in good, lane_id in good, right in good
-        if lane_id not in good and good:
-            targets = [ids.index(g) for g in good if g in ids]
-            if targets:
-                best = min(targets, key=lambda t: abs(t - here))
-                scene["route_lane_offset"] = int(best - here)
+        good_here = frozenset(ids.index(g) for g in good if g in ids)
+        r[2], r[3], r[4], scene["route_lane_offset"] = route_lane_features(here, good_here, r[0] > 0, r[1] > 0)
         remaining = max(lane.length - lane_pos, 0.0)
         r[8] = np.clip(remaining / max(lane.length, 1e-6), 0.0, 1.0)
         scene["stop_distance_m"] = remaining

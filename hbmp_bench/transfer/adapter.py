@@ -34,7 +34,8 @@ except ModuleNotFoundError as exc:
     raise ModuleNotFoundError("the highway-env transfer envs need highway-env, an optional extra: "
                               "pip install 'hbmp-bench[highway-env]'", name=exc.name) from exc
 
-from hbmp_bench.envs.observation import ROAD_FEATURES, ObservationConfig, occupancy_grid, road_vector
+from hbmp_bench.envs.observation import (ROAD_FEATURES, ObservationConfig, occupancy_grid, road_vector,
+                                         route_lane_features)
 from hbmp_bench.planning.behaviors import BEHAVIORS, Behavior
 from hbmp_bench.planning.frame import Path
 from hbmp_bench.transfer.scenes import TransferScene
@@ -219,12 +220,10 @@ class HighwayAdapter:
             here, n = index[2], len(self.network.graph[index[0]][index[1]])
             left, right = self.neighbours(ego)
             r[_R["e_l"]], r[_R["e_r"]] = left is not None, right is not None
-            r[_R["a_l"]] = here - 1 >= 0 and here - 1 in good
-            r[_R["a_c"]] = here in good
-            r[_R["a_r"]] = here + 1 < n and here + 1 in good
-            if here not in good and good:
-                best = min(good, key=lambda g: abs(g - here))
-                scene["route_lane_offset"] = int(here - best)
+            # highway-env numbers lanes from the left: negate to route_lane_features' +left
+            a_l, a_c, a_r, offset = route_lane_features(-here, frozenset(-g for g in good), 0 <= here - 1,
+                                                        here + 1 < n)
+            r[_R["a_l"]], r[_R["a_c"]], r[_R["a_r"]], scene["route_lane_offset"] = a_l, a_c, a_r, offset
             s_front = lane.local_coordinates(ego.position)[0] + ego.LENGTH / 2
             remaining = max(float(lane.length) - s_front, 0.0)
             r[_R["d_s"]] = np.clip(remaining / max(float(lane.length), 1e-6), 0.0, 1.0)

@@ -8,7 +8,7 @@ import pytest
 import hbmp_bench  # noqa: F401  (registers the ids)
 from hbmp_bench.envs import make
 from hbmp_bench.envs.observation import (ROAD_FEATURES, ROAD_PROFILES, SPEED_SCALE_MPS, STOP_SCALE_M,
-                                         ObservationConfig, road_vector)
+                                         ObservationConfig, road_vector, route_lane_features)
 from hbmp_bench.errors import UnknownNameError
 
 ENV_ID = "hbmp_bench/Town01-NavigationDynamic-v0"
@@ -86,5 +86,34 @@ def test_transfer_env_builds_the_metric_profile():
         obs, info = env.reset(seed=0)
         assert env.observation_space["road"].shape == (12,) and env.observation_space.contains(obs)
         assert obs["road"][11] == pytest.approx(min(info["scene"]["speed_mps"] / SPEED_SCALE_MPS, 2.0), abs=1e-6)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("here, good, sides, expected", [
+    (1, {0, 1, 2}, (True, True), (True, True, True, 0)),   # every lane continues
+    (1, {0}, (True, True), (False, False, True, -1)),      # the right neighbour is the route lane
+    (3, {0}, (False, True), (False, False, True, -3)),     # three lanes away: change right
+    (0, {3}, (True, False), (True, False, False, 3)),      # three lanes away: change left
+    (3, {0}, (False, False), (False, False, False, -3)),   # no neighbour to change to (inside a junction)
+    (2, {0, 4}, (True, True), (False, False, True, -2)),   # equally far both ways: the right one
+    (1, frozenset(), (True, True), (False, False, False, 0)),  # no route lane known
+])
+def test_route_lane_features_point_towards_the_nearest_route_lane(here, good, sides, expected):
+    assert route_lane_features(here, frozenset(good), *sides) == expected
+
+
+def test_a_motorway_start_three_lanes_off_the_route_shows_the_way():
+    """hbmp Town04 Straight 19: a start in the left lane of four, the goal on the right lane behind the
+    next junction. Under the literal a_l/a_c/a_r all three were 0 and the shipped il stood for
+    the whole episode; R_t now says change right."""
+    env = make("hbmp_bench/Town04-Straight-v0", suite="hbmp", fidelity="event", episode_index=19)
+    try:
+        obs, info = env.reset(seed=0)
+        ego = env.unwrapped.parallel.world.ego
+        assert ego.state.lane.endswith("_3") and ego.route.episode.goal_lane.endswith("_0")
+        road = dict(zip(ROAD_FEATURES, obs["road"]))
+        assert (road["e_l"], road["e_r"], road["a_l"], road["a_c"], road["a_r"]) == (0, 1, 0, 0, 1)
+        assert info["scene"]["route_lane_offset"] == -2  # the two right lanes reach the goal lane in time
     finally:
         env.close()
