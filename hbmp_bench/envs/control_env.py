@@ -16,7 +16,7 @@ ego's acceleration and steering every 0.1 s. Same scenarios, traffic, detectors 
 the lane width and its heading error divided by π/2, both clipped to [-2, 2].
 
 ## Rewards
-``reward="dense"``: r_T + r_t with r_t = −dt·(c_dist + c_obs) of the ego's state after the step
+``reward="dense"``: r_T + r_t with r_t = λ(dt·(c_dist + c_obs)) of the ego's state after the step
 (:func:`hbmp_bench.planning.instant_costs`), the paper's baseline reward without the velocity term;
 ``dt`` = 0.1 s keeps Σr_t on HBMP's per-second scale (one r_k per ~1 s behavior).
 ``reward="sparse"``: r_T only.

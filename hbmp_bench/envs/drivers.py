@@ -33,7 +33,7 @@ from hbmp_bench.envs.observation import followed_path
 from hbmp_bench.maps.roadnet import LANE_CHANGE_CUTOFF_M, RoadNetwork
 from hbmp_bench.planning import (Behavior, BehaviorConfig, BehaviorExecutor, Control, ExecutorConfig, Obstacles,
                                  PlannerConfig, PlanResult, ReferencePaths, VehicleParams, instant_costs,
-                                 reference_speed)
+                                 reference_speed, reward_from_cost)
 from hbmp_bench.planning import VehicleState as ModelState
 from hbmp_bench.planning import step as bicycle_step
 from hbmp_bench.sim.sumo import Actors, SumoSim, VehicleState, VehicleType
@@ -283,8 +283,10 @@ class ControlDriver(ModelDriver):
         return True
 
     def behavior_reward(self) -> float:
-        """r_t = −dt·(c_dist + c_obs) after the step."""
-        return -self.dt * (self.planner.w_dist * self._costs[0] + self.planner.w_obs * self._costs[1])
+        """r_t = λ(dt·(c_dist + c_obs)) after the step: HBMP's λ (``ExecutorConfig.reward_scale``)
+        on the per-second cost, so Σr_t stays on the scale of HBMP's one r_k per ~1 s behavior."""
+        cost = self.dt * (self.planner.w_dist * self._costs[0] + self.planner.w_obs * self._costs[1])
+        return float(reward_from_cost(cost, self.config.executor.reward_scale))
 
     def behavior_costs(self) -> dict[str, float]:
         return {"c_dist": self._costs[0], "c_obs": self._costs[1]}

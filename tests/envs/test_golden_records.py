@@ -1,8 +1,8 @@
 """The expert's seeded episodes give the records and decision digests stored in ``golden/records.json``
 (written by ``golden_records.py --write``): a refactor keeps behaviour, step for step, in both fidelities,
 single-ego and multi-agent. They were stored before the envs redesign, which kept them; they are rewritten
-only for a deliberate change of behaviour, named in its commit (last: the planner's road corridor, which moved
-two continuous episodes by a decision and ~1 s, same outcomes)."""
+only for a deliberate change of behaviour, named in its commit (last: λ's scale 1 -> 0.01, which changed the
+continuous episodes' rewards only; records, actions and observations the same)."""
 
 import json
 

@@ -170,7 +170,7 @@ def test_cost_and_reward_bookkeeping():
         totals.append(p.c_total)
         ego = step(ego, control, 0.1)
     assert ex.c_total == pytest.approx(np.mean(totals))
-    assert ex.reward() == pytest.approx(-ex.c_total)
+    assert ex.reward() == pytest.approx(-ex.cfg.reward_scale * ex.c_total)
     assert ex.reward(scale=2.0) == pytest.approx(-2.0 * ex.c_total)
     out = ex.outcome()
     assert out.c_total == pytest.approx(ex.c_total) and len(out.c_terms) == 3
