@@ -33,7 +33,9 @@ junction, a lane or two from the only lane that continues, and the ego looped th
 ``LANE_CHANGE_BEGIN_M`` of an edge before the cutoff, not any number (two changes on a 16 m Town03 edge after a
 roundabout: hbmp Navigation 6 and 32). 11: routes whose timeout a lawful driver cannot meet are drawn again
 (``scenarios.suites.lawful_route_time``: the route at its speed limits plus one full red at its slowest light):
-two corl2017 Town03 Straight episodes, and 9 of 25 Straight episodes of CARLA's Town10HD imported."""
+two corl2017 Town03 Straight episodes, and 9 of 25 Straight episodes of CARLA's Town10HD imported. The built-in
+towns' junction lanes are drawn with 20 points (5) and their crossings are 2 m wide (4): right turns passed into
+pedestrians waiting to cross (``RoadNetwork.crossing_clearance``)."""
 
 TASK_LABELS = {
     "Straight": "Straight",
