@@ -39,7 +39,9 @@ class BehaviorEnv(gym.Env):
     ``reward="dense"`` (default, HBMP): r_k + r_T. r_k = λ(c̃_total) = −c̃_total, the mean cost of
     the planner's chosen trajectories over the behavior (0 in event fidelity); r_T is the paper's
     terminal reward, paid when the event happens: +100 goal, −50 collision or timeout, −10 red
-    light, −1 wrong lane / off-road. ``reward="sparse"`` (HBMP-S): r_T only.
+    light, −1 wrong lane / off-road, and −50 more when the episode ends before the goal otherwise
+    than by a collision or a timeout (left the network; a violation under the paper's protocol: see
+    ``metrics.episode.TERMINAL_REWARD``). ``reward="sparse"`` (HBMP-S): r_T only.
     ``info["reward_components"]`` has both; ``info["planner_costs"]`` the cost terms.
 
     ## Episode end

@@ -21,12 +21,15 @@ TERMINAL_REWARD = {
     "off_road": -1.0,
 }
 """The paper's r_T: +100 goal, −50 collision or overtime, −10 red light, −1 wrong lane (off-road
-is counted like a wrong lane). Each event pays once, when it happens. An episode that ends because the
-car left the network before its goal (its route ended in a lane other than the goal's, or it drove off the
-map) can no longer reach the goal: it pays the overtime's −50 (``GOAL_UNREACHABLE``; the paper has no such
-terminal state, and paying nothing would make it the cheapest way to end a training episode)."""
+is counted like a wrong lane). Each event pays once, when it happens. An episode that ends before its goal
+for any reason but a collision can no longer reach it and pays the overtime's −50 as well
+(``GOAL_UNREACHABLE``): the car left the network (its route ended in a lane other than the goal's, or it
+drove off the map: the paper has no such terminal state), or, under the paper's protocol, a violation
+ended it (a red light then pays −60, a wrong lane −51). With the paper's values alone, ending an episode
+by the cheapest violation (−1) beats every attempt that may time out (−50): a policy that cannot yet reach
+the goal learns to leave the lane within two seconds, as the flat baseline did (``agents/checkpoints/flat.md``)."""
 
-GOAL_UNREACHABLE = ("timeout", "left_network")
+GOAL_UNREACHABLE = ("timeout", "left_network", "violation")
 """End reasons that pay ``TERMINAL_REWARD["timeout"]``: the goal can no longer be reached."""
 
 PROGRESS_SLACK_M = 5.0

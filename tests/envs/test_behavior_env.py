@@ -140,3 +140,21 @@ def test_leaving_the_network_before_the_goal_pays_the_overtime_penalty():
     assert terminated and not truncated and info["episode"]["end_reason"] == "left_network"
     assert info["reward_components"]["r_T"] == TERMINAL_REWARD["timeout"] == -50.0
     assert not info["episode"]["success"]
+
+
+def test_an_episode_a_violation_ends_pays_the_overtime_penalty_too():
+    """Under the paper's protocol a red light ends the episode: it pays −10 and the overtime's −50 (with −10
+    alone, running a light would be the cheap way out of an episode that might time out); under CoRL2017 the
+    episode goes on and the red light pays −10. Town01 Navigation 3, speed_up only, runs a red after 8 s."""
+    rewards = {}
+    for suite in ("hbmp", "corl2017"):
+        env = gym.make("hbmp_bench/Town01-Navigation-v0", suite=suite, episode_index=3, fidelity="event").unwrapped
+        env.reset(seed=0)
+        for _ in range(400):
+            _, _, terminated, truncated, info = env.step(0)
+            if info["reward_components"]["r_T"] < 0 or terminated or truncated:
+                break
+        env.close()
+        rewards[suite] = (terminated, info["reward_components"]["r_T"])
+    assert rewards["hbmp"] == (True, TERMINAL_REWARD["red_light"] + TERMINAL_REWARD["timeout"])
+    assert rewards["corl2017"] == (False, TERMINAL_REWARD["red_light"])
