@@ -28,6 +28,11 @@ NETCONVERT_OPTIONS: tuple[str, ...] = (
     "--default.lanewidth", "3.5",          # m
     "--default.sidewalk-width", str(SIDEWALK_WIDTH),  # m
     "--default.junctions.radius", "6",     # m, corner radius of junction shapes
+    # pedestrians waiting at a crossing stand on the kerb line across its width: with 4 m crossings and
+    # 5-point junction lanes (whose chords cut towards the kerb) right turns passed into them
+    # (RoadNetwork.crossing_clearance: -0.35 to -1.23 m); smooth lanes and 2 m crossings leave room
+    "--junctions.internal-link-detail", "20",  # points per junction lane curve (default 5)
+    "--default.crossing-width", "2",           # m (default 4)
     "--crossings.guess", "true",
     "--no-turnarounds", "true",
     "--junctions.join", "false",

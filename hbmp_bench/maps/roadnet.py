@@ -522,6 +522,34 @@ class RoadNetwork:
         return tuple(out)
 
     @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
+    def crossing_clearance(self, car_width_m: float = 2.0, pedestrian_width_m: float = 0.5) -> tuple[float, str, str]:
+        """The smallest gap [m] between a car ``car_width_m`` wide on the centre of a drivable junction lane
+        and a pedestrian ``pedestrian_width_m`` wide waiting to cross at a junction of that lane: on the
+        kerb line across either end of a crossing, spread over its width (where SUMO puts them).
+        Returns (gap, junction lane, crossing); (inf, "", "") without crossings. A negative gap: the car
+        cannot turn past someone waiting there (with 4 m crossings and 5-point junction lanes the towns'
+        right turns passed 0.35-1.25 m into them, and a lawful car waited behind them for a whole cycle)."""
+        best = (float("inf"), "", "")
+        waiting: dict[str, list[tuple[str, np.ndarray]]] = {}
+        for crossing in self.crossings.values():
+            node = crossing.id[1:].rsplit("_", 1)[0]
+            half = max(crossing.width / 2 - pedestrian_width_m / 2, 0.0)
+            for end, inner in ((crossing.shape[0], crossing.shape[1]), (crossing.shape[-1], crossing.shape[-2])):
+                along = (inner - end) / max(float(np.hypot(*(inner - end))), 1e-9)
+                across = np.array([-along[1], along[0]])
+                points = end + np.linspace(-half, half, 9)[:, None] * across
+                waiting.setdefault(node, []).append((crossing.id, points))
+        for conns in self._drivable_links.values():
+            for link in conns:
+                for lane_id in self.link_lanes(link):
+                    shape = self.internal_lanes[lane_id].shape
+                    node = lane_id[1:].rsplit("_", 2)[0]
+                    for crossing_id, points in waiting.get(node, ()):
+                        gap = float(np.min(_project_points(shape, points)[1])) - (car_width_m + pedestrian_width_m) / 2
+                        if gap < best[0]:
+                            best = (gap, lane_id, crossing_id)
+        return best
+
     def link_crossings(self, link: Connection) -> tuple[tuple[Crossing, float, float], ...]:
         """The pedestrian crossings of the junction that ``link`` passes over or beside: (crossing,
         start, end [m] along the link's junction lanes of the stretch within half the crossing's

@@ -9,7 +9,7 @@ from dataclasses import asdict, dataclass, field
 TASKS: tuple[str, ...] = ("Straight", "OneTurn", "Navigation", "NavigationDynamic")
 """The CoRL2017 task categories, as used in env ids (``hbmp_bench/Town01-OneTurn-v0``)."""
 
-EPISODE_RULES_VERSION = 10
+EPISODE_RULES_VERSION = 11
 """Version of how a suite's episodes are drawn and measured, part of ``Suite.definition_hash`` so
 that records and leaderboard results of older episode lists never mix with current ones. Bump it
 whenever the episode lists or their route lengths / timeouts change. 2: route length is the length
@@ -31,7 +31,11 @@ junction, a lane or two from the only lane that continues, and the ego looped th
 ``LANE_CHANGE_BEGIN_M`` (5 m) of an edge before the lane-change cutoff: Town03 routes that needed a change on a
 12.5 m edge behind a junction (hbmp Navigation 19 and 23). 10: ``route_drivable`` allows one lane change per
 ``LANE_CHANGE_BEGIN_M`` of an edge before the cutoff, not any number (two changes on a 16 m Town03 edge after a
-roundabout: hbmp Navigation 6 and 32)."""
+roundabout: hbmp Navigation 6 and 32). 11: routes whose timeout a lawful driver cannot meet are drawn again
+(``scenarios.suites.lawful_route_time``: the route at its speed limits plus one full red at its slowest light):
+two corl2017 Town03 Straight episodes, and 9 of 25 Straight episodes of CARLA's Town10HD imported. The built-in
+towns' junction lanes are drawn with 20 points (5) and their crossings are 2 m wide (4): right turns passed into
+pedestrians waiting to cross (``RoadNetwork.crossing_clearance``)."""
 
 TASK_LABELS = {
     "Straight": "Straight",

@@ -232,6 +232,31 @@ def _mean_length(town: str, task: str) -> float:
     return mean_route_lengths(town)[min(TASKS.index(task), 2)]
 
 
+def lawful_route_time(town: str, route: tuple[str, ...], length_m: float) -> float:
+    """A lower bound [s] of the time a lawful driver needs for ``length_m`` [m] along ``route``: the
+    length at the route's speed limits (their length-weighted pace over the route's edges) and one
+    full wait at the route's slowest light (the longest red of any of its signalised links)."""
+    net = road_network(town)
+    edges_m = np.array([net.edge_length[e] for e in route])
+    limits = np.array([net.lanes[net.edge_lanes[e][0]].speed for e in route])
+    pace = float(np.sum(edges_m / np.maximum(limits, 1e-3)) / max(np.sum(edges_m), 1e-9))
+    programs = _programs(town)
+    red = max((programs[c.tls].longest_red(c.link_index) for a, b in zip(route[:-1], route[1:])
+               for c in net.links(a, b) if c.tls in programs), default=0.0)
+    return length_m * pace + red
+
+
+def _programs(town: str):
+    return _programs_of(town, map_hash(town))
+
+
+@functools.lru_cache(maxsize=None)
+def _programs_of(town: str, net_hash: str):
+    from hbmp_bench.maps.signals import read_programs
+
+    return read_programs(net_path(town))
+
+
 def _seed(*parts: object) -> int:
     return zlib.crc32("/".join(map(str, parts)).encode())
 
@@ -257,7 +282,10 @@ def sample_episode(
     lane to the goal lane, junction lanes included (``RoadNetwork.route_length``). Routes whose length falls
     outside the task's band are rejected, and so are poses the route cannot be driven from
     (``RoadNetwork.route_drivable``: a start lane that no lane change can leave before the junction
-    where the route turns off it, as on the short edges of real towns' road splits); the band widens
+    where the route turns off it, as on the short edges of real towns' road splits), and so are routes
+    whose timeout a lawful driver cannot meet (:func:`lawful_route_time`: at the speed limits, with one
+    full red at the route's slowest light; the suite's timeout rule is kept, e.g. CoRL2017's 10 km/h +
+    10 s, which leaves a 60 m route 32 s, less than one red of CARLA's Town10HD); the band widens
     step by step if a small map has none. (``route_drivable`` redraws 1-4 Town03 episodes per suite of the
     built-in towns, episode rules 9 and 10; CARLA's Town10HD imported: 43 of 335 before them.)
     """
@@ -279,8 +307,10 @@ def sample_episode(
             start_lane = start_lanes[int(rng.integers(len(start_lanes)))]
             goal_lane = net.reachable_goal_lanes(route, goal_pos, start_lane, start_pos)[0]
             length = net.route_length(route, start_pos, goal_pos, start_lane, goal_lane)
+            timeout_s = round(length / (suite.timeout_speed_kmh / 3.6) + suite.timeout_extra_s, 1)
             if lo / factor * mean <= length <= hi * factor * mean and \
-                    net.route_drivable(route, start_lane, start_pos, goal_lane, goal_pos):
+                    net.route_drivable(route, start_lane, start_pos, goal_lane, goal_pos) and \
+                    lawful_route_time(town, route, length) <= timeout_s:
                 return Episode(
                     suite=suite.name,
                     town=town,
@@ -295,7 +325,7 @@ def sample_episode(
                     route_length_m=round(length, 2),
                     turns=turns,
                     traffic=traffic,
-                    timeout_s=round(length / (suite.timeout_speed_kmh / 3.6) + suite.timeout_extra_s, 1),
+                    timeout_s=timeout_s,
                     success_radius_m=suite.success_radius_m,
                     end_on_violation=suite.end_on_violation,
                     end_on_collision=suite.end_on_collision,

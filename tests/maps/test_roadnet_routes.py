@@ -266,3 +266,12 @@ def test_two_lane_changes_need_room_for_two():
     assert not net.route_drivable(route, "-AS_RS_1", 5.0, goal, 30.0)
     assert net.route_drivable(route[1:], "-I125_95_AS_2", 0.0, goal, 30.0)   # one change: room for it
     assert not net.route_drivable(route[1:], "-I125_95_AS_1", 0.0, goal, 30.0)
+
+
+@pytest.mark.parametrize("town", ["Town01", "Town02", "Town03", "Town04", "Town05"])
+def test_a_car_turning_past_pedestrians_waiting_to_cross_clears_them(town):
+    """Pedestrians wait on the kerb line across a crossing's width. With netconvert's 4 m crossings and
+    5-point junction lanes the towns' right turns passed 0.35-1.25 m into them, and the lawful expert
+    stood behind them through whole cycles (Town02 Nav. dynamic: 12 of 25 CoRL2017 episodes timed out)."""
+    gap, lane, crossing = road_network(town).crossing_clearance()
+    assert gap >= 0.0, (lane, crossing, gap)

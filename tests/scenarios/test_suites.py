@@ -127,3 +127,22 @@ def test_every_route_is_drivable_from_its_start_lane(suite):
                 changes = min(abs(net.lanes[ep.start_lane].index - i) for i in good)
                 room = net.edge_length[ep.route[0]] - LANE_CHANGE_CUTOFF_M - ep.start_pos
                 assert changes == 0 or changes * 20.0 <= room, (town, task, ep.index)
+
+
+@pytest.mark.parametrize("suite", ["hbmp", "corl2017"])
+def test_a_lawful_driver_can_meet_every_timeout(suite):
+    """The suite's timeout (CoRL2017: the route at 10 km/h + 10 s) leaves time to drive the route at its
+    speed limits and wait out one full red at its slowest light (two corl2017 Town03 Straight routes did
+    not, nor 9 of 25 Straight routes of CARLA's Town10HD imported)."""
+    from hbmp_bench.maps import net_path
+    from hbmp_bench.maps.signals import read_programs
+
+    for town in get_suite(suite).towns:
+        net, programs = road_network(town), read_programs(net_path(town))
+        for task in TASKS:
+            for ep in suite_episodes(suite, town, task):
+                lengths = [net.edge_length[e] for e in ep.route]
+                seconds = sum(m / net.lanes[net.edge_lanes[e][0]].speed for m, e in zip(lengths, ep.route))
+                red = max((programs[c.tls].longest_red(c.link_index) for a, b in zip(ep.route[:-1], ep.route[1:])
+                           for c in net.connections[a] if c.to_edge == b and c.tls), default=0.0)
+                assert ep.route_length_m * seconds / sum(lengths) + red <= ep.timeout_s + 0.05, (town, task, ep.index)
