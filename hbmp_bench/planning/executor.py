@@ -104,13 +104,17 @@ class ExecutorConfig:
         lane_keeping_max_duration: speed_up, speed_down and keep are stopped after this long [s].
         reward_scale: the scale of the paper's λ (:func:`reward_from_cost`, used by
             :meth:`BehaviorExecutor.reward` and by the flat baseline's r_t). The paper gives λ only as
-            "a mapping with negative scaling". With episodes that end at the first violation, the scale
-            decides whether lawful driving pays: a car standing at a red light costs c_dist = 1 per
-            decision (about one a second), so at scale 1 waiting through a 50 s red cost −50 where
-            running it costs −10 and a wrong lane −1, and PPO learnt to run red lights (measured:
-            42 → 57 → 67 red-light ends per 100 training episodes, goals 49 → 32 → 29). At 0.01, waiting
-            through the towns' longest red (57.4 s, Town04) costs −0.57: less than the cheapest violation.
-            A test holds this against the towns' signal programs.
+            "a mapping with negative scaling"; with episodes that end at the first violation the scale
+            decides what PPO learns, since a car standing still costs c_dist = 1 per decision (about
+            one a second). Too large, and waiting through a red costs more than running it: at 1 (a 50 s
+            red: −50 against −10) PPO learnt to run red lights (42 → 57 → 67 red-light ends per 100
+            training episodes, goals 49 → 32 → 29). Too small, and standing still is free: at 0.01 the
+            PPO policy's training success rose (57 → 88 %) but its most likely behavior stood still, and
+            greedily it timed out in 8 of 15 Town03 Navigation episodes (a timeout 300 decisions ahead is
+            worth −50 · 0.99^300 = −2.5 now). 0.25 keeps both apart: waiting through the towns' longest
+            red (57.4 s) costs 14, less than any violation that ends an episode (−51, with the overtime's
+            −50: :data:`hbmp_bench.metrics.episode.GOAL_UNREACHABLE`), and standing still for good costs
+            0.25 / (1 − 0.99) = 25, more than a red light's own −10. A test holds both bounds.
     """
 
     dt: float = 0.1
@@ -121,7 +125,7 @@ class ExecutorConfig:
     min_duration: float = 1.0
     max_duration: float = 8.0
     lane_keeping_max_duration: float = 2.0
-    reward_scale: float = 0.01
+    reward_scale: float = 0.25
 
     def __post_init__(self):
         for name in ("dt", "e_thresh", "theta_thresh", "v_thresh", "max_duration", "lane_keeping_max_duration",
