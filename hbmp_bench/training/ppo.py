@@ -18,7 +18,9 @@ Deviations from the paper, and why:
   (r_T = −10) and a violation ends the episode. PPO from il found that: red-light ends per 100 training
   episodes 42 → 57 → 67, goals 49 → 32 → 29 (``training_runs/hbmp-cont``, scale 1). The drift the anchor
   below was built against is this reward, not only the clip: the same run at scale 0.01
-  (``training_runs/hbmp-scale001``) rose from 57 % to 88 % training success within 200 PPO episodes.
+  (``training_runs/hbmp-scale001``) rose from 57 % to 88 % training success within 200 PPO episodes,
+  but there standing still was free and the greedy policy stood; 0.25 bounds both ways (see the
+  ``reward_scale`` docstring).
 - IL anchor (not in the paper; ``anchor_coef``, default 0): the loss gains ``anchor_coef`` times a KL
   between the policy and π_IL, the frozen ``--init`` actor, over the mini-batch's states:
   ``anchor_kl="forward"``: KL(π_IL ‖ π), mass-covering (π must keep probability wherever π_IL has some,
