@@ -174,8 +174,8 @@ class ControlledVehicle:
             self.end_reason = "left_network"  # also: driven so far off the road SUMO cannot place it
             return StepEvents()
         self.state = state = self.driver.observe(state)
-        if state.lane in net.lanes:
-            self.followed_lane = state.lane
+        if state.lane in net.lanes and (not self.followed_lane or net.within_reach(self.followed_lane, state.lane)):
+            self.followed_lane = state.lane  # (not a jump onto another level: RoadNetwork.within_reach)
         self.route.moved()
         self.actors = actors = snapshot.around(self.id)
         lane = self.followed_lane

@@ -262,6 +262,20 @@ class RoadNetwork:
         sharper than ``SHARPEST_TURN_RADIUS_M``."""
         return tuple(sorted({c.to_edge for c in self._drivable_links[edge]}))
 
+    def within_reach(self, from_lane: str, to_lane: str, junctions: int = 2) -> bool:
+        """Whether a car on ``from_lane`` can be on ``to_lane`` a moment later: a lane of the same edge, or of
+        an edge reached through at most ``junctions`` junctions (by any link, drivable or not). SUMO maps a
+        pushed pose onto the nearest lane of the vehicle's route in 2D, so where the route passes under a
+        road it drives over later (Town04's ramps) a pose can land on the other level: such a jump is not."""
+        start, goal = self.lanes[from_lane].edge, self.lanes[to_lane].edge
+        frontier, seen = {start}, {start}
+        for _ in range(junctions + 1):
+            if goal in frontier:
+                return True
+            frontier = {c.to_edge for e in frontier for c in self.connections.get(e, ())} - seen
+            seen |= frontier
+        return False
+
     def links(self, edge: str, to_edge: str) -> tuple[Connection, ...]:
         """The lane-level links a car can drive from ``edge`` to ``to_edge`` (no sharper than
         ``SHARPEST_TURN_RADIUS_M``; ``connections`` has them all)."""

@@ -275,3 +275,14 @@ def test_a_car_turning_past_pedestrians_waiting_to_cross_clears_them(town):
     stood behind them through whole cycles (Town02 Nav. dynamic: 12 of 25 CoRL2017 episodes timed out)."""
     gap, lane, crossing = road_network(town).crossing_clearance()
     assert gap >= 0.0, (lane, crossing, gap)
+
+
+def test_a_pose_on_another_level_is_not_within_reach():
+    """Town04: the route of hbmp Navigation 18 drives Min_E_Kin_E, which passes over Dout_E_R_E; SUMO mapped the
+    pushed pose onto the road below, the ego followed that lane and left its own road. Navigation 8 drives the
+    ramp R_E_Mout_E over Kin_N_Din_E, which its route took earlier."""
+    net = road_network("Town04")
+    assert not net.within_reach("Min_E_Kin_E_0", "Dout_E_R_E_0")
+    assert not net.within_reach("R_E_Mout_E_0", "Kin_N_Din_E_0")
+    assert net.within_reach("Min_E_Kin_E_0", net.edge_lanes[net.successors("Min_E_Kin_E")[0]][0])
+    assert net.within_reach("Kin_N_Din_E_0", "Kin_N_Din_E_1")  # a lane change
