@@ -35,7 +35,8 @@ and ignored. The ego runs ``ego_fidelity`` (default continuous), background agen
 
 ## Rewards, ends, infos
 Per agent, the single-ego definition: r_T when an event happens (collision −50, red light −10,
-wrong lane / off-road −1; the ego also +100 goal and −50 timeout), plus, with ``reward="dense"``,
+wrong lane / off-road −1; the ego also +100 goal and −50 timeout, and −50 when a violation ends its
+episode or it leaves the network: ``metrics.episode.GOAL_UNREACHABLE``), plus, with ``reward="dense"``,
 r_k = λ(c̃_total) when the agent's behavior ends (0 in event fidelity), and on its last step for
 the part of the behavior its end cut short. The ego ends by its episode's rules (``DrivingWorld``);
 a background agent is terminated by its own collision or by leaving the network (its vehicle then
