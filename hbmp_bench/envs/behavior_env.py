@@ -36,7 +36,8 @@ class BehaviorEnv(gym.Env):
     M_t and R_t, see :mod:`hbmp_bench.envs.observation` for every cell and entry.
 
     ## Rewards
-    ``reward="dense"`` (default, HBMP): r_k + r_T. r_k = λ(c̃_total) = −c̃_total, the mean cost of
+    ``reward="dense"`` (default, HBMP): r_k + r_T. r_k = λ(c̃_total) = −scale · c̃_total
+    (``ExecutorConfig.reward_scale``, 0.25), c̃_total the mean cost of
     the planner's chosen trajectories over the behavior (0 in event fidelity); r_T is the paper's
     terminal reward, paid when the event happens: +100 goal, −50 collision or timeout, −10 red
     light, −1 wrong lane / off-road, and −50 more when the episode ends before the goal otherwise

@@ -535,7 +535,6 @@ class RoadNetwork:
                     out.append(LinkConflict(foe, *zone, *foe_zone))
         return tuple(out)
 
-    @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
     def crossing_clearance(self, car_width_m: float = 2.0, pedestrian_width_m: float = 0.5) -> tuple[float, str, str]:
         """The smallest gap [m] between a car ``car_width_m`` wide on the centre of a drivable junction lane
         and a pedestrian ``pedestrian_width_m`` wide waiting to cross at a junction of that lane: on the
@@ -564,6 +563,7 @@ class RoadNetwork:
                             best = (gap, lane_id, crossing_id)
         return best
 
+    @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
     def link_crossings(self, link: Connection) -> tuple[tuple[Crossing, float, float], ...]:
         """The pedestrian crossings of the junction that ``link`` passes over or beside: (crossing,
         start, end [m] along the link's junction lanes of the stretch within half the crossing's

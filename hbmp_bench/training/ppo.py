@@ -12,7 +12,7 @@ Deviations from the paper, and why:
   ``desired_kl`` the actor's rate follows rsl-rl's adaptive rule (÷1.5 when the mini-batch KL to the
   roll-out policy exceeds 2 × desired, ×1.5 below ½ × desired), the critic's stays at ``LR_c``
   (rsl-rl's own schedule would set both groups to one rate).
-- λ's scale (the env's ``ExecutorConfig.reward_scale``, 0.01): the paper leaves the scale of its
+- λ's scale (the env's ``ExecutorConfig.reward_scale``, 0.25): the paper leaves the scale of its
   cost-to-reward mapping open. At scale 1 the dense reward paid for violations: a standing car costs
   c_dist = 1 per decision, so waiting through a red (23-57 s in the towns) cost more than running it
   (r_T = −10) and a violation ends the episode. PPO from il found that: red-light ends per 100 training
