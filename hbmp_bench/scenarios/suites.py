@@ -1,4 +1,4 @@
-"""Suites (corl2017, hbmp, nocrash-*) and the deterministic episode lists they expand to.
+"""Suites (corl2017, hbmp, nocrash-*, and hbmp-val for choosing checkpoints) and the deterministic episode lists they expand to.
 
 Episodes are a pure function of (suite, town, task) and the town's net: the suite seed drives a
 numpy generator that picks start and goal poses among the routes of the town's lane graph whose
@@ -93,6 +93,21 @@ register_suite(
         description="The HBMP paper's protocol: 40 episodes per task, the episode ends at the goal or "
         "at the first rule violation (a red light included); timeout at 5 km/h + 20 s, NoCrash's rule for "
         "drivers that stop at red lights (the paper gives none).",
+    )
+)
+register_suite(
+    Suite(
+        name="hbmp-val",
+        towns=("Town03",),
+        tasks=("Navigation", "NavigationDynamic"),
+        episodes_per_task=20,
+        seed=3,
+        end_on_violation=True,
+        timeout_speed_kmh=5.0,
+        timeout_extra_s=20.0,
+        description="Validation, not a test: 20 Navigation and 20 Navigation dynamic episodes of the training "
+        "town Town03 under the hbmp suite's rules, drawn from their own seed, on which PPO runs choose among "
+        "their checkpoints (train --validate-every); report results on hbmp, corl2017 or nocrash-*.",
     )
 )
 for _density in ("empty", "regular", "dense"):

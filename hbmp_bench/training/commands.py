@@ -101,6 +101,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
         args.episodes = DEFAULT_EPISODES[kind]
     if args.out is None:
         args.out = os.path.join("runs", f"{kind}__{args.scenario.split('/')[-1]}__{args.seed}__{int(time.time())}")
+    if args.validate_every and kind == "il":
+        raise ValueError("--validate-every applies to hbmp, hbmp-s and flat (DAgger's rounds.csv has its holdout)")
     if args.ppo and kind == "il":
         raise ValueError("--ppo options apply to hbmp, hbmp-s and flat (il is trained by DAgger)")
     if args.ppo and args.resume:
@@ -128,7 +130,8 @@ def _cmd_train(args: argparse.Namespace) -> int:
     run = RunConfig(kind=kind, episodes=args.episodes, out=args.out, workers=args.workers, backend=args.backend,
                     address=args.address, seed=args.seed,
                     save_every=args.save_every, resume=args.resume, command=_command_line(args),
-                    progress=not args.no_progress)
+                    progress=not args.no_progress, validate_every=args.validate_every,
+                    validate_episodes=args.validate_episodes)
     os.makedirs(args.out, exist_ok=True)
     try:
         with exclusive_lock(os.path.join(args.out, "train.lock"), lambda holder: TrainingRunning(
@@ -235,6 +238,11 @@ def add_commands(subparsers) -> None:
                         "entropy_coef=0.001, anchor_coef=1, desired_kl=0.01, num_steps_per_env=256 "
                         "(defaults: the paper's values, rsl-rl's where it gives none)")
     p.add_argument("--save-every", type=int, default=50, help="checkpoint every N episodes")
+    p.add_argument("--validate-every", type=int, default=0, metavar="N",
+                   help="PPO: every N episodes, evaluate the greedy policy on the hbmp-val suite (40 held-out "
+                        "Town03 episodes) into validation.csv and keep the best as best.pt; 0: never")
+    p.add_argument("--validate-episodes", type=int, default=None, metavar="N",
+                   help="with --validate-every: the first N validation episodes per task (default: all 20)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_train)
 

@@ -76,6 +76,7 @@ from hbmp_bench.training.checkpoints import load_checkpoint, policy_only, save_c
 from hbmp_bench.training.models import behavior_model_cfgs, control_model_cfgs, observation_shapes
 from hbmp_bench.training.run import Progress, RunConfig, episode_row, final_results, progress_bar
 from hbmp_bench.training.runlog import EPISODE_COLUMNS, ITERATION_COLUMNS, CsvLog, plot_run, write_model_card
+from hbmp_bench.training.validation import Validator
 from hbmp_bench.training.worker import WorkerEnvConfig
 
 MASK_GROUP = "action_mask"
@@ -419,7 +420,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
     from rsl_rl.runners import OnPolicyRunner
 
     env = run.vec_env(env_config, seed=run.seed * 1_000_003 + progress.episodes)
-    log = iterations = bar = None
+    log = iterations = bar = validator = None
     try:
         from gymnasium import spaces
 
@@ -459,6 +460,10 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
         log = CsvLog(run.path("episodes.csv"), EPISODE_COLUMNS, keep_through=progress.episodes if resume else None)
         iterations = CsvLog(run.path("iterations.csv"), ITERATION_COLUMNS,
                             keep_through=progress.iterations if resume else None, key="iteration")
+        validator = Validator(run.out, run.validate_every, run.workers, env_config.kwargs.get("fidelity"),
+                              resumed_at=progress.episodes if resume else None, episodes=run.validate_episodes)
+        if validator.due(progress.episodes):  # a fresh run: the initial actor is the first row
+            validator(progress.episodes, checkpoint())
         bar = progress_bar(run, progress.episodes)
         last_save = progress.episodes
         alg.freeze_actor(progress.episodes < ppo.critic_warmup_episodes)
@@ -481,6 +486,10 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
             if progress.episodes - last_save >= run.save_every:
                 save_checkpoint(run.path("checkpoint.pt"), checkpoint())
                 last_save = progress.episodes
+            if validator.due(progress.episodes):
+                row = validator(progress.episodes, checkpoint())
+                bar.write(f"validation at episode {progress.episodes}: success {row['success']:.1%} "
+                          f"(best {validator.best:.1%})")
             if progress.episodes >= run.episodes:
                 raise BudgetReached
 
@@ -495,7 +504,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
         save_checkpoint(run.path("policy.pt"), policy_only(final))
     finally:
         env.close()
-        for csv_log in (log, iterations):
+        for csv_log in (log, iterations, validator):
             if csv_log is not None:
                 csv_log.close()
         if bar is not None:

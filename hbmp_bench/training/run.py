@@ -4,6 +4,8 @@ Folder of a run (``out``):
     episodes.csv     one row per finished episode (see :mod:`hbmp_bench.training.runlog`)
     rounds.csv       DAgger only: loss and agreement with the expert per training round
     iterations.csv   PPO only: losses per rsl-rl iteration and whether the actor was frozen (warm-up)
+    validation.csv   PPO with validate_every: the greedy policy's success on held-out Town03 episodes
+    best.pt          PPO with validate_every: the actor of the best validation so far
     checkpoint.pt    latest full checkpoint (weights + optimizer), for ``--resume``
     dataset.npz      DAgger only: the aggregated dataset, for ``--resume``
     policy.pt        the final policy without optimizer state (what ships in the package)
@@ -43,6 +45,9 @@ class RunConfig:
         command: the command line, for the model card.
         progress: show a tqdm bar.
         torch_threads: torch intra-op threads of the trainer (None: cores left by the workers, >= 1).
+        validate_every: PPO: evaluate the greedy policy on the ``hbmp-val`` suite every this many
+            episodes and keep the best as ``best.pt`` (0: never; see :mod:`hbmp_bench.training.validation`).
+        validate_episodes: the first this many episodes per task of ``hbmp-val`` (None: all 20).
     """
 
     kind: str
@@ -57,6 +62,8 @@ class RunConfig:
     command: str = ""
     progress: bool = True
     torch_threads: int | None = None
+    validate_every: int = 0
+    validate_episodes: int | None = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
@@ -75,6 +82,10 @@ class RunConfig:
             raise ValueError("address is for the ray backend only (--backend ray)")
         if self.save_every < 1:
             raise ValueError(f"save_every must be >= 1, got {self.save_every}")
+        if self.validate_every < 0:
+            raise ValueError(f"validate_every must be >= 0 (0: never), got {self.validate_every}")
+        if self.validate_episodes is not None and self.validate_episodes < 1:
+            raise ValueError(f"validate_episodes must be >= 1, got {self.validate_episodes}")
 
     def path(self, name: str) -> str:
         return os.path.join(self.out, name)

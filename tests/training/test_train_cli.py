@@ -197,3 +197,34 @@ def test_metric_road_profile_travels_from_training_to_evaluation(tmp_path):
     ckpt = torch.load(os.path.join(hbmp, "checkpoint.pt"), weights_only=True)
     assert ckpt["model"]["env"]["road_profile"] == "metric" and ckpt["progress"]["episodes"] == 2
     assert "--road-profile metric" in open(os.path.join(hbmp, "MODEL_CARD.md")).read()
+
+
+def test_validation_rows_and_best_policy(il_run, tmp_path):
+    """--validate-every: the initial actor first, then the greedy policy every N episodes on hbmp-val;
+    best.pt is the best row's actor (ties: the later one) and acts; a resume keeps the rows before it."""
+    out = str(tmp_path / "hbmp-val")
+    il_policy = os.path.join(il_run, "policy.pt")
+    assert main(["train", "hbmp", "--episodes", "2", "--workers", "1", "--out", out, "--init", il_policy,
+                 "--critic-warmup", "0", "--validate-every", "2", "--validate-episodes", "1", *COMMON]) == 0
+    rows = read_csv(os.path.join(out, "validation.csv"))
+    assert rows["episode"][0] == 0 and rows["episode"][-1] >= 2 and len(rows["episode"]) == 2
+    assert (rows["episodes"] == 2).all(), "the first episode of each of hbmp-val's two tasks"
+    assert ((rows["success"] >= 0) & (rows["success"] <= 1)).all()
+    assert (rows["route_completion"] > 0).all() and (rows["wall_s"] > 0).all()
+    best = torch.load(os.path.join(out, "best.pt"), weights_only=True)
+    assert set(best) >= {"kind", "model", "actor_state_dict"} and "critic_state_dict" not in best
+    final = torch.load(os.path.join(out, "policy.pt"), weights_only=True)
+    il = torch.load(il_policy, weights_only=True)
+    chosen = final if rows["success"][1] >= rows["success"][0] else il
+    assert all(torch.equal(chosen["actor_state_dict"][k], v) for k, v in best["actor_state_dict"].items())
+    _acts(os.path.join(out, "best.pt"))
+
+    assert main(["train", "hbmp", "--episodes", "3", "--workers", "1", "--out", out, "--validate-every", "2",
+                 "--validate-episodes", "1", "--resume", os.path.join(out, "checkpoint.pt"), *COMMON]) == 0
+    again = read_csv(os.path.join(out, "validation.csv"))
+    assert again["episode"].tolist()[:2] == rows["episode"].tolist(), "rows up to the checkpoint are kept"
+
+
+def test_validate_every_is_for_ppo(tmp_path, capsys):
+    assert main(["train", "il", "--validate-every", "5", "--out", str(tmp_path / "il"), *COMMON]) == 2
+    assert "--validate-every" in capsys.readouterr().err and not os.path.exists(tmp_path / "il")

@@ -1,0 +1,125 @@
+"""Greedy validation of a PPO run's policy on held-out episodes of the training town.
+
+Training success (``episodes.csv``) is the *sampled* policy's: PPO explores by drawing behaviors from
+π, while every agent is evaluated by its most likely behavior. The two can disagree by tens of points
+(the shipped ``il`` reaches the goal in ~55 % of its sampled Town03 training episodes and in > 95 % of
+the ``hbmp`` suite's Town03 Navigation episodes), so the sampled curve cannot say whether PPO has
+improved the greedy policy, nor which checkpoint to ship.
+
+Every ``validate_every`` episodes the run evaluates its current actor on the ``hbmp-val`` suite
+(Town03 Navigation and Navigation dynamic, 20 each, the paper's protocol, episodes drawn from their own
+seed: not the test suites' episodes) with the package's evaluator (isolated processes, as ``evaluate``
+runs agents), appends a row to ``validation.csv`` and writes the actor to ``best.pt`` when its success
+is the best so far (ties: the later one). A fresh run validates its initial actor first (episode 0), so
+the ``il`` baseline is the first row. The training workers wait meanwhile; 40 continuous episodes take
+~2 min on 2 cores.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+
+VALIDATION_SUITE = "hbmp-val"
+VALIDATION_COLUMNS = ("episode", "success", "success_navigation", "success_navigation_dynamic", "route_completion",
+                      "red_light", "collision", "wrong_lane", "timeout", "episodes", "wall_s")
+"""``validation.csv``: the run's episode count when validated, success over all validation episodes and
+per task, mean route completion, the episodes ending with each failure kind, how many episodes, and the
+validation's wall time [s]."""
+
+
+def actor_only(checkpoint: dict[str, Any]) -> dict[str, Any]:
+    """What an agent needs of a PPO checkpoint: kind, model, actor weights, progress and options (~1 MB)."""
+    return {k: checkpoint[k] for k in ("kind", "model", "actor_state_dict", "progress", "train") if k in checkpoint}
+
+
+def validate(policy: str, workers: int, fidelity: str | None = None, episodes: int | None = None,
+             progress: bool = False) -> dict[str, Any]:
+    """Evaluate the checkpoint ``policy`` greedily on :data:`VALIDATION_SUITE`: its first ``episodes``
+    episodes per task (None: all), in ``workers`` evaluation slots, in ``fidelity`` (None: the default).
+
+    Returns the columns of :data:`VALIDATION_COLUMNS` but ``episode``.
+    """
+    import time
+
+    from hbmp_bench.evaluation import Job, run_jobs
+    from hbmp_bench.scenarios import get_suite
+
+    suite = get_suite(VALIDATION_SUITE)
+    start = time.perf_counter()
+    count = suite.episodes_per_task if episodes is None else min(episodes, suite.episodes_per_task)
+    jobs = [Job(suite.name, town, task, policy, tuple(range(count)), fidelity)
+            for town in suite.towns for task in suite.tasks]
+    records = run_jobs(jobs, workers=workers, progress=progress)
+
+    def rate(rows) -> float:
+        return round(float(np.mean([r.success for r in rows])), 4) if rows else float("nan")
+
+    return {
+        "success": rate(records),
+        "success_navigation": rate([r for r in records if r.task == "Navigation"]),
+        "success_navigation_dynamic": rate([r for r in records if r.task == "NavigationDynamic"]),
+        "route_completion": round(float(np.mean([r.route_completion for r in records])), 4),
+        "red_light": sum(r.red_light > 0 for r in records),
+        "collision": sum(r.collision_vehicle + r.collision_pedestrian + r.collision_other > 0 for r in records),
+        "wrong_lane": sum(r.wrong_lane > 0 for r in records),
+        "timeout": sum(bool(r.timeout) for r in records),
+        "episodes": len(records),
+        "wall_s": round(time.perf_counter() - start, 1),
+    }
+
+
+class Validator:
+    """The run's validation schedule, ``validation.csv`` and ``best.pt``.
+
+    Args:
+        out: the run folder.
+        every: validate every this many episodes (0: never).
+        workers: evaluation slots.
+        episodes: validation episodes per task (None: all).
+        fidelity: the training env's fidelity.
+        resumed_at: the episode count a resumed run continues from (rows after it are dropped); None
+            for a fresh run.
+    """
+
+    def __init__(self, out: str, every: int, workers: int, fidelity: str | None, resumed_at: int | None,
+                 episodes: int | None = None):
+        from hbmp_bench.training.runlog import CsvLog, read_csv
+
+        self.out, self.every, self.workers, self.fidelity, self.episodes = out, every, workers, fidelity, episodes
+        self.log = CsvLog(os.path.join(out, "validation.csv"), VALIDATION_COLUMNS, keep_through=resumed_at) \
+            if every > 0 else None
+        done = read_csv(os.path.join(out, "validation.csv")) if self.log is not None else {}
+        episodes, success = list(done.get("episode", [])), list(done.get("success", []))
+        self.best = max(success) if success else -1.0
+        self.last = int(max(episodes)) if episodes else None
+
+    def due(self, episodes: int) -> bool:
+        """Whether the run should validate at this episode count (first call of a fresh run: yes)."""
+        if self.log is None:
+            return False
+        return self.last is None or episodes >= self.last + self.every
+
+    def __call__(self, episodes: int, checkpoint: dict[str, Any]) -> dict[str, Any]:
+        """Validate ``checkpoint`` (the run at ``episodes``), log it, keep it as ``best.pt`` if best."""
+        import tempfile
+
+        from hbmp_bench.training.checkpoints import save_checkpoint
+
+        actor = actor_only(checkpoint)
+        with tempfile.TemporaryDirectory(prefix="hbmp-validation-") as folder:
+            policy = os.path.join(folder, "policy.pt")
+            save_checkpoint(policy, actor)
+            row = {"episode": episodes, **validate(policy, self.workers, self.fidelity, self.episodes)}
+        self.log.write(row)
+        self.last = episodes
+        if row["success"] >= self.best:
+            self.best = row["success"]
+            save_checkpoint(os.path.join(self.out, "best.pt"), actor)
+        return row
+
+    def close(self) -> None:
+        if self.log is not None:
+            self.log.close()
