@@ -463,7 +463,11 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
         validator = Validator(run.out, run.validate_every, run.workers, env_config.kwargs.get("fidelity"),
                               resumed_at=progress.episodes if resume else None, episodes=run.validate_episodes)
         if validator.due(progress.episodes):  # a fresh run: the initial actor is the first row
-            validator(progress.episodes, checkpoint())
+            if run.progress:
+                print("validating the greedy policy on hbmp-val ...", flush=True)
+            row = validator(progress.episodes, checkpoint())
+            if run.progress:
+                print(f"validation at episode {progress.episodes}: success {row['success']:.1%}", flush=True)
         bar = progress_bar(run, progress.episodes)
         last_save = progress.episodes
         alg.freeze_actor(progress.episodes < ppo.critic_warmup_episodes)
@@ -487,6 +491,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
                 save_checkpoint(run.path("checkpoint.pt"), checkpoint())
                 last_save = progress.episodes
             if validator.due(progress.episodes):
+                bar.write(f"validating the greedy policy at episode {progress.episodes} on hbmp-val ...")
                 row = validator(progress.episodes, checkpoint())
                 bar.write(f"validation at episode {progress.episodes}: success {row['success']:.1%} "
                           f"(best {validator.best:.1%})")
