@@ -250,5 +250,19 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USER_ERROR
 
 
-if __name__ == "__main__":
+def console() -> None:
+    """The ``hbmp-bench`` program: :func:`main` with SIGTERM (a scheduler's stop, ``kill``) and SIGINT
+    handled like Ctrl-C, also where the shell started the program with SIGINT ignored (``cmd &``):
+    runs close their workers and keep what is written, and print how to resume."""
+    import signal
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    signal.signal(signal.SIGTERM, interrupt)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     sys.exit(main())
+
+
+if __name__ == "__main__":
+    console()

@@ -1,4 +1,4 @@
-"""Ctrl-C in a terminal during ``hbmp-bench evaluate`` and ``train``: the whole process group gets
+"""Ctrl-C in a terminal during ``hbmp-bench evaluate`` and ``train`` (and SIGTERM to a background job): the whole process group gets
 SIGINT; the command ends every child, keeps its files whole, says how to resume in one line, and
 exits with 130."""
 
@@ -58,15 +58,17 @@ def _lines(path: Path) -> int:
     return path.read_text().count("\n") if path.exists() else 0
 
 
-def _interrupt(argv: list[str], started, children: int) -> tuple[str, str]:
+def _interrupt(argv: list[str], started, children: int, background: bool = False) -> tuple[str, str]:
     """Run ``hbmp-bench argv`` as a terminal's foreground job, press Ctrl-C once ``started()`` holds
     (and a moment more), and check it exits with 130, one stderr line, and no process left behind.
-    Returns (stdout, stderr)."""
+    ``background``: instead, start it as ``cmd &`` does (SIGINT ignored) and stop it as ``kill`` or a
+    scheduler does (SIGTERM to the command alone). Returns (stdout, stderr)."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([AGENTS_DIR, os.environ.get("PYTHONPATH", "")])}
     # a session of its own: the command and every process it starts share one process group, as in a terminal
+    sigint = signal.SIG_IGN if background else signal.SIG_DFL  # as a shell starts `cmd &`, or a terminal `cmd`
     proc = subprocess.Popen([sys.executable, "-m", "hbmp_bench.cli", *argv], env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))  # as a terminal starts it
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, sigint))
     try:
         deadline = time.monotonic() + 180
         while not started() and proc.poll() is None and time.monotonic() < deadline:
@@ -75,7 +77,10 @@ def _interrupt(argv: list[str], started, children: int) -> tuple[str, str]:
         assert proc.poll() is None, "the run ended before it could be interrupted"
         started_processes = _running(proc.pid)
         assert len(started_processes) > children, "the command's children should be running"
-        os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C does
+        if background:
+            os.kill(proc.pid, signal.SIGTERM)  # what kill, systemd or a batch scheduler does
+        else:
+            os.killpg(proc.pid, signal.SIGINT)  # what Ctrl-C does
         stdout, stderr = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
@@ -90,10 +95,12 @@ def _interrupt(argv: list[str], started, children: int) -> tuple[str, str]:
     return stdout, stderr
 
 
-def test_ctrl_c_stops_evaluate_cleanly_and_says_how_to_resume(tmp_path):
+@pytest.mark.parametrize("background", [False, True], ids=["ctrl-c", "sigterm-to-a-background-job"])
+def test_ctrl_c_stops_evaluate_cleanly_and_says_how_to_resume(tmp_path, background):
     out = tmp_path / "runs"
     path = records_path(out, "corl2017", AGENT)
-    stdout, stderr = _interrupt(["evaluate", *ARGS[1:], "--out", str(out)], lambda: _lines(path) >= 1, children=2)
+    stdout, stderr = _interrupt(["evaluate", *ARGS[1:], "--out", str(out)], lambda: _lines(path) >= 1, children=2,
+                                background=background)
     assert stdout == ""
     lines = stderr.splitlines()
     kept = read_records(path)
