@@ -33,6 +33,15 @@ class RaisingAgent(_Base):
         return KEEP
 
 
+class ThreadReportingAgent(_Base):
+    """Fails its first decision with the size of torch's thread pool in the message."""
+
+    def act(self, observation, info):
+        import torch
+
+        raise RuntimeError(f"torch threads={torch.get_num_threads()}")
+
+
 class HangingAgent(_Base):
     """Never answers its third decision."""
 

@@ -24,6 +24,15 @@ def test_raising_agent_fails_its_episodes_and_the_run_finishes(tmp_path):
         assert record.decisions == 3  # three decisions executed before the fourth act raised
 
 
+def test_agent_process_runs_one_numeric_thread_unless_the_caller_asks(tmp_path, monkeypatch):
+    one = dict(SELECTION, episodes=1)
+    result = evaluate("corl2017", "misbehaving_agents:ThreadReportingAgent", out_dir=tmp_path / "a", **one)
+    assert "torch threads=1" in result.records[0].error
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    result = evaluate("corl2017", "misbehaving_agents:ThreadReportingAgent", out_dir=tmp_path / "b", **one)
+    assert "torch threads=2" in result.records[0].error
+
+
 def test_hanging_agent_is_stopped_by_the_decision_timeout(tmp_path):
     result = evaluate("corl2017", "misbehaving_agents:HangingAgent", out_dir=tmp_path,
                       limits=RunnerLimits(decision_timeout_s=1.0), **SELECTION)
