@@ -76,7 +76,7 @@ from hbmp_bench.training.checkpoints import load_checkpoint, policy_only, save_c
 from hbmp_bench.training.models import behavior_model_cfgs, control_model_cfgs, observation_shapes
 from hbmp_bench.training.run import Progress, RunConfig, episode_row, final_results, progress_bar
 from hbmp_bench.training.runlog import EPISODE_COLUMNS, ITERATION_COLUMNS, CsvLog, plot_run, write_model_card
-from hbmp_bench.training.validation import Validator
+from hbmp_bench.training.validation import Validator, validation_results
 from hbmp_bench.training.worker import WorkerEnvConfig
 
 MASK_GROUP = "action_mask"
@@ -516,5 +516,5 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
             bar.close()
     plot_run(run.out, f"{run.kind} ({env_config.reward} reward)")
     write_model_card(run.path("MODEL_CARD.md"), run.kind, run.command, run.seed, final["progress"], options,
-                     final_results(run.path("episodes.csv")))
+                     {**final_results(run.path("episodes.csv")), **validation_results(run.out)})
     return {"progress": final["progress"], "policy": run.path("policy.pt")}

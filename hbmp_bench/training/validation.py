@@ -71,6 +71,22 @@ def validate(policy: str, workers: int, fidelity: str | None = None, episodes: i
     }
 
 
+def validation_results(out: str) -> dict[str, str]:
+    """Model-card lines of a run's ``validation.csv``: its first, best and last rows (empty without one)."""
+    from hbmp_bench.training.runlog import read_csv
+
+    path = os.path.join(out, "validation.csv")
+    rows = read_csv(path) if os.path.isfile(path) else {}
+    if not rows:
+        return {}
+    episode, success = rows["episode"], rows["success"]
+    best = int(np.flatnonzero(success == success.max())[-1])
+    line = lambda i: f"{success[i]:.1%} at episode {int(episode[i])}"  # noqa: E731
+    return {f"greedy success on {VALIDATION_SUITE}, first": line(0),
+            f"greedy success on {VALIDATION_SUITE}, best (best.pt)": line(best),
+            f"greedy success on {VALIDATION_SUITE}, last": line(len(success) - 1)}
+
+
 class Validator:
     """The run's validation schedule, ``validation.csv`` and ``best.pt``.
 

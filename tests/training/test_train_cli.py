@@ -218,6 +218,8 @@ def test_validation_rows_and_best_policy(il_run, tmp_path):
     chosen = final if rows["success"][1] >= rows["success"][0] else il
     assert all(torch.equal(chosen["actor_state_dict"][k], v) for k, v in best["actor_state_dict"].items())
     _acts(os.path.join(out, "best.pt"))
+    card = open(os.path.join(out, "MODEL_CARD.md")).read()
+    assert f"greedy success on hbmp-val, first: {rows['success'][0]:.1%} at episode 0" in card
 
     assert main(["train", "hbmp", "--episodes", "3", "--workers", "1", "--out", out, "--validate-every", "2",
                  "--validate-episodes", "1", "--resume", os.path.join(out, "checkpoint.pt"), *COMMON]) == 0
