@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import heapq
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -46,6 +47,10 @@ TURN_WINDOW_M = 3.0
 
 WALK_SPAWN_MIN_M = 2.0
 """Pedestrians are spawned only on edges longer than this [m] (1 m from either end)."""
+
+WITHIN_REACH_M = 25.0
+"""Road [m] between the lane a car was on and the one SUMO reports next, beyond which the report is a jump (onto
+another level) and not a move (:meth:`RoadNetwork.within_reach`)."""
 
 
 @dataclass(frozen=True)
@@ -262,18 +267,29 @@ class RoadNetwork:
         sharper than ``SHARPEST_TURN_RADIUS_M``."""
         return tuple(sorted({c.to_edge for c in self._drivable_links[edge]}))
 
-    def within_reach(self, from_lane: str, to_lane: str, junctions: int = 2) -> bool:
+    def within_reach(self, from_lane: str, to_lane: str, road_m: float = WITHIN_REACH_M) -> bool:
         """Whether a car on ``from_lane`` can be on ``to_lane`` a moment later: a lane of the same edge, or of
-        an edge reached through at most ``junctions`` junctions (by any link, drivable or not). SUMO maps a
+        an edge reached by links (drivable or not) over at most ``road_m`` [m] of the edges between. SUMO maps a
         pushed pose onto the nearest lane of the vehicle's route in 2D, so where the route passes under a
-        road it drives over later (Town04's ramps) a pose can land on the other level: such a jump is not."""
+        road it drives over later (Town04's ramps: 772 and 1095 m of road between the two levels) a pose can
+        land on the other level: such a jump is not within reach. Real towns split roads into pieces of
+        0.1-0.2 m that a car passes between two reports of its lane (CARLA's Town07: 5#1, 5#0 (0.2 m), 4
+        (0.2 m), 3), so reach is measured in metres of road, not in junctions."""
         start, goal = self.lanes[from_lane].edge, self.lanes[to_lane].edge
-        frontier, seen = {start}, {start}
-        for _ in range(junctions + 1):
-            if goal in frontier:
+        best, queue = {start: 0.0}, [(0.0, start)]
+        while queue:
+            dist, edge = heapq.heappop(queue)
+            if edge == goal:
                 return True
-            frontier = {c.to_edge for e in frontier for c in self.connections.get(e, ())} - seen
-            seen |= frontier
+            if dist > best[edge]:
+                continue
+            through = dist + (self.edge_length.get(edge, 0.0) if edge != start else 0.0)
+            if through > road_m:
+                continue
+            for c in self.connections.get(edge, ()):
+                if through < best.get(c.to_edge, math.inf):
+                    best[c.to_edge] = through
+                    heapq.heappush(queue, (through, c.to_edge))
         return False
 
     def links(self, edge: str, to_edge: str) -> tuple[Connection, ...]:

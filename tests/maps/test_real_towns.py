@@ -130,3 +130,45 @@ def test_dynamic_episodes_start_with_their_traffic(town):
             assert asked.pedestrians > 0
             assert (record.traffic_vehicles, record.traffic_pedestrians) == (asked.vehicles, asked.pedestrians)
         env.close()
+
+
+@pytest.mark.parametrize("town", REAL_TOWNS or ["none"])
+def test_the_followed_lane_reaches_over_a_routes_short_pieces(town):
+    """Real towns split roads into pieces of 0.1-0.2 m that a car passes between two reports of its lane. The
+    ego's followed lane refused the lane after them (reach was counted in junctions), so it stayed behind and
+    the continuous ego drove on straight: 14 of 100 corl2017 episodes of CARLA's Town07 (.net.xml) and 4 (.xodr)
+    left the road."""
+    for kind, src in _sources(town):
+        name = f"{town}_{kind}"
+        import_map(src, name)
+        net = road_network(name)
+        for suite in ("corl2017", "hbmp"):
+            for task in TASKS:
+                for ep in suite_episodes(suite, name, task):
+                    route = ep.route
+                    for i in range(len(route) - 1):
+                        j = i + 1
+                        while j < len(route) - 1 and net.edge_length[route[j]] < 1.0:
+                            j += 1  # a car may pass these between two reports of its lane
+                        assert net.within_reach(net.edge_lanes[route[i]][0], net.edge_lanes[route[j]][0]), \
+                            (suite, ep.key, route[i:j + 1])
+
+
+@pytest.mark.slow
+@pytest.mark.skipif("Town07" not in REAL_TOWNS, reason="needs CARLA's Town07")
+def test_the_continuous_ego_turns_after_split_pieces():
+    """corl2017 One turn 9 of CARLA's Town07 (.net.xml): the route 6, 5#1, 5#0 (0.2 m), 4 (0.2 m), 3, -12 turns
+    right after the pieces; the expert drove straight on and left the road."""
+    from hbmp_bench.agents import agent_env_kwargs, load_agent
+    from hbmp_bench.envs import BehaviorEnv
+    from hbmp_bench.rollout import run_episode
+
+    import_map(CARLA_DIR / "Town07.net.xml", "T07n", lights="lawful")
+    agent = load_agent("expert")
+    env = BehaviorEnv(town="T07n", task="OneTurn", suite="corl2017", fidelity="continuous", **agent_env_kwargs(agent))
+    try:
+        assert env.episodes[9].route[:6] == ("6", "5#1", "5#0", "4", "3", "-12")
+        run_episode(env, agent, seed=9, options={"episode_index": 9})
+        assert env.record().end_reason == "goal"
+    finally:
+        env.close()
