@@ -50,13 +50,17 @@ XODR_OPTIONS: tuple[str, ...] = (
     "--geometry.min-radius.fix", "true",
     "--geometry.remove", "true",
     "--opendrive.curve-resolution", "1",
+    "--opendrive.internal-shapes", "true",
     "--junctions.join", "false",
     "--no-turnarounds", "true",
     "--output.street-names", "false",
     "--xml-validation", "never",
     "--no-warnings", "true",
 )
-"""netconvert options of an OpenDRIVE import (with ``--type-files``: the lane type map)."""
+"""netconvert options of an OpenDRIVE import (with ``--type-files``: the lane type map). Junction lanes take
+the shapes of the file's connecting roads (``--opendrive.internal-shapes``): netconvert's own shapes join the
+lane ends by a straight chord where a road piece before the junction is too short to give a direction (CARLA's
+Town07 has 0.1 m pieces), and the ego turning on such a chord cut the corner 2.5 m onto the shoulder."""
 
 NET_OPTIONS: tuple[str, ...] = (
     "--xml-validation", "never",
