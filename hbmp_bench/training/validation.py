@@ -11,8 +11,8 @@ Every ``validate_every`` episodes the run evaluates its current actor on the ``h
 seed: not the test suites' episodes) with the package's evaluator (isolated processes, as ``evaluate``
 runs agents), appends a row to ``validation.csv`` and writes the actor to ``best.pt`` when its success
 is the best so far (ties: the later one). A fresh run validates its initial actor first (episode 0), so
-the ``il`` baseline is the first row. The training workers wait meanwhile; 40 continuous episodes take
-~2 min on 2 cores.
+the ``il`` baseline is the first row. The training workers wait meanwhile; 40 continuous episodes took
+4-7 min on a 2-core machine that ran other work beside.
 """
 
 from __future__ import annotations
