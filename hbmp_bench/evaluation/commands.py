@@ -125,12 +125,49 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
     raise AssertionError(args.leaderboard_cmd)
 
 
+def _cmd_agreement(args: argparse.Namespace) -> int:
+    import json
+
+    from hbmp_bench.evaluation.agreement import agreement
+    from hbmp_bench.scenarios import check_town, get_suite
+
+    suite = get_suite(args.suite)
+    town = check_town(args.town) if args.town else suite.towns[0]
+    task = args.task or ("NavigationDynamic" if "NavigationDynamic" in suite.tasks else suite.tasks[0])
+    if task not in suite.tasks:
+        raise ValueError(f"suite {suite.name} has no task {task!r}; its tasks: {', '.join(suite.tasks)}")
+    results = agreement(args.agent, args.others, suite.name, town, task, args.episodes, fidelity=args.fidelity,
+                        progress=not args.json)
+    if args.json:
+        print(json.dumps([r.to_dict() for r in results], indent=2))
+        return 0
+    print(f"{args.agent} drove {args.episodes} {suite.name} {town} {task} episodes; in its states the others chose:")
+    for r in results:
+        print(f"\n{r.agent}: {r.differ} of {r.decisions} decisions differ ({r.differ_pct:.1f} %)")
+        for (mine, theirs, where), n in r.pairs.most_common(args.top):
+            print(f"  {n:6d}  {mine} -> {theirs}  ({where})")
+    return 0
+
+
 def add_commands(sub: argparse._SubParsersAction) -> None:
     """Add ``evaluate``, ``report`` and ``leaderboard`` to the ``hbmp-bench`` parser."""
     p = sub.add_parser("evaluate", help="run an agent on a suite (towns x tasks), isolated and resumable")
     _add_selection(p, agent_default="expert")
     p.add_argument("--out", default="runs", help="folder of the records file <suite>__<agent>.jsonl (default: runs)")
     p.set_defaults(func=_cmd_evaluate)
+
+    p = sub.add_parser("agreement", help="how far other policies' choices differ from one driver's, state by state")
+    p.add_argument("--agent", default="il", help="the driver: registry name or checkpoint (default: il)")
+    p.add_argument("--with", dest="others", nargs="+", required=True, metavar="AGENT",
+                   help="agents asked in the driver's states (registry names or checkpoints)")
+    p.add_argument("--suite", default="hbmp-val", help="episode suite (default: hbmp-val, no test episodes)")
+    p.add_argument("--town", default=None, help="map (default: the suite's first town)")
+    p.add_argument("--task", default=None, help="task (default: NavigationDynamic where the suite has it)")
+    p.add_argument("--episodes", type=int, default=8, help="first N episodes (default: 8)")
+    p.add_argument("--fidelity", default=None, help="world fidelity (default: the env's)")
+    p.add_argument("--top", type=int, default=8, help="differing pairs shown per agent (default: 8)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=_cmd_agreement)
 
     p = sub.add_parser("report", help="tables (CSV, markdown) and a failure bar chart from records")
     p.add_argument("paths", nargs="+", metavar="DIR", help="records folders or .jsonl files (one result set each)")
