@@ -137,7 +137,7 @@ def test_ctrl_c_stops_train_cleanly_and_names_the_resume_command(tmp_path):
     command = shlex.split(stderr[len(prefix):])
     assert command == ["hbmp-bench", "train", "il", "--scenario", "hbmp_bench/Town02-Straight-v0", "--episodes", "40",
                        "--workers", "1", "--seed", "0", "--out", str(out), "--fidelity", "event",
-                       "--resume", str(checkpoint)]
+                       "--resume", str(checkpoint), "--save-every", "1"]
 
     # what the interrupt left resumes (one more round instead of all 40 episodes, to keep the test short)
     command[command.index("--episodes") + 1] = str(done + 1)

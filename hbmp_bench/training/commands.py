@@ -31,6 +31,8 @@ REWARD = {"il": "dense", "hbmp": "dense", "hbmp-s": "sparse", "flat": "env"}
 CONTROL_ENV = "hbmp_bench.envs.control_env:ControlEnv"
 CRITIC_WARMUP_EPISODES = 100
 """Default critic warm-up of a PPO run that starts from an IL actor (none from a random one)."""
+SAVE_EVERY = 50
+"""Default checkpoint interval [episodes]."""
 
 
 def _command_line(args: argparse.Namespace) -> str:
@@ -48,6 +50,12 @@ def _command_line(args: argparse.Namespace) -> str:
         parts += ["--ppo", assignment]
     if args.mask_actions:
         parts.append("--mask-actions")
+    if args.save_every != SAVE_EVERY:
+        parts += ["--save-every", str(args.save_every)]
+    if args.validate_every:
+        parts += ["--validate-every", str(args.validate_every)]
+        if args.validate_episodes is not None:
+            parts += ["--validate-episodes", str(args.validate_episodes)]
     return " ".join(shlex.quote(p) for p in parts)
 
 
@@ -186,7 +194,9 @@ def _resume_hint(args: argparse.Namespace) -> str:
     if done >= args.episodes:
         return (f"all {done} episodes are trained ({checkpoint}); {os.path.join(args.out, 'policy.pt')}, "
                 "the curves or the model card may be missing")
-    again = _command_line(argparse.Namespace(**{**vars(args), "resume": checkpoint}))
+    # a resume keeps the initial actor, PPO options and warm-up its checkpoint recorded (and refuses --ppo)
+    again = _command_line(argparse.Namespace(**{**vars(args), "resume": checkpoint, "init": None, "ppo": [],
+                                                "critic_warmup": None}))
     return f"the last checkpoint is {checkpoint} ({done} of {args.episodes} episodes); resume with: {again}"
 
 
@@ -237,7 +247,7 @@ def add_commands(subparsers) -> None:
                    help="PPO option, repeatable: any field of hbmp_bench.training.ppo.PPOConfig, e.g. "
                         "entropy_coef=0.001, anchor_coef=1, desired_kl=0.01, num_steps_per_env=256 "
                         "(defaults: the paper's values, rsl-rl's where it gives none)")
-    p.add_argument("--save-every", type=int, default=50, help="checkpoint every N episodes")
+    p.add_argument("--save-every", type=int, default=SAVE_EVERY, help="checkpoint every N episodes")
     p.add_argument("--validate-every", type=int, default=0, metavar="N",
                    help="PPO: every N episodes, evaluate the greedy policy on the hbmp-val suite (40 held-out "
                         "Town03 episodes) into validation.csv and keep the best as best.pt; 0: never")

@@ -230,3 +230,26 @@ def test_validation_rows_and_best_policy(il_run, tmp_path):
 def test_validate_every_is_for_ppo(tmp_path, capsys):
     assert main(["train", "il", "--validate-every", "5", "--out", str(tmp_path / "il"), *COMMON]) == 2
     assert "--validate-every" in capsys.readouterr().err and not os.path.exists(tmp_path / "il")
+
+
+def test_the_resume_hint_is_a_command_train_accepts(tmp_path):
+    """An interrupted PPO run prints how to continue: without what a resume refuses (--ppo) or ignores (--init,
+    --critic-warmup: the checkpoint recorded them), with the save and validation cadence it ran with."""
+    import shlex
+
+    from hbmp_bench.cli import build_parser
+    from hbmp_bench.training.checkpoints import save_checkpoint
+    from hbmp_bench.training.commands import _resume_hint
+
+    out = tmp_path / "run"
+    argv = ["train", "hbmp", "--out", str(out), "--episodes", "3000", "--init", "il", "--ppo", "anchor_coef=0.1",
+            "--critic-warmup", "50", "--validate-every", "100", "--save-every", "25"]
+    save_checkpoint(str(out / "checkpoint.pt"),
+                    {"kind": "hbmp", "progress": {"episodes": 10, "decisions": 1, "iterations": 1, "wall_s": 1.0}})
+    hint = _resume_hint(build_parser().parse_args(argv))
+    assert "(10 of 3000 episodes)" in hint
+    command = shlex.split(hint.split("resume with: ")[1])
+    assert not {"--ppo", "--init", "--critic-warmup"} & set(command)
+    assert command[command.index("--resume") + 1] == str(out / "checkpoint.pt")
+    assert command[command.index("--validate-every") + 1] == "100" and command[command.index("--save-every") + 1] == "25"
+    build_parser().parse_args(command[1:])
