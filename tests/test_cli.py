@@ -244,7 +244,7 @@ def test_train_resume_hint_follows_what_the_interrupt_left(tmp_path):
         if done == 5:
             assert hint.startswith(f"the last checkpoint is {checkpoint} (5 of 10 episodes); resume with: hbmp-bench "
                                    "train il ")
-            assert hint.endswith(f"--out {tmp_path} --resume {checkpoint}")
+            assert hint.endswith(f"--out {tmp_path} --resume {checkpoint} --save-every 5")  # the run's cadence
         else:  # interrupted after the last checkpoint, while writing the outputs: nothing to resume
             assert hint == f"all 10 episodes are trained ({checkpoint}); {tmp_path / 'policy.pt'}, the curves or the " \
                            "model card may be missing"
