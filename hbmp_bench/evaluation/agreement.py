@@ -21,7 +21,6 @@ LIGHT_NEAR_M = 40.0
 """A light's signal is the situation of a decision when its stop line is this close [m]."""
 STANDING_MPS = 0.5
 """Below this speed [m/s] the ego counts as standing."""
-BEHAVIOR_NAMES = ("speed_up", "speed_down", "change_left", "change_right", "keep")
 
 
 @dataclass
@@ -62,9 +61,10 @@ def situation(info: dict[str, Any]) -> str:
 
 
 def _action_name(action: Any) -> str:
-    if isinstance(action, (int,)) and 0 <= action < len(BEHAVIOR_NAMES):
-        return BEHAVIOR_NAMES[action]
-    return str(action)
+    """A behavior's name (``planning.BEHAVIORS``), or a control vector as text."""
+    from hbmp_bench.planning.behaviors import BEHAVIORS
+
+    return BEHAVIORS[action] if isinstance(action, int) and 0 <= action < len(BEHAVIORS) else str(action)
 
 
 def merged_env_kwargs(agents: dict[str, Any]) -> dict[str, Any]:
@@ -103,8 +103,8 @@ def agreement(driver: str, others: list[str], suite: str, town: str, task: str, 
     options = {} if fidelity is None else {"fidelity": fidelity}
     env = BehaviorEnv(town=town, task=task, suite=suite, **options, **merged_env_kwargs(agents))
     results = [Agreement(spec) for spec in others]
-    states: list[tuple[Any, dict]] = []
-    last: list[tuple[Any, dict]] = []
+    states: list[tuple[Any, dict, Any]] = []  # (observation, info, the driver's action) of the episode
+    last: list[tuple[Any, dict]] = []  # the observation the driver acts on next
 
     def on_reset(obs, info):
         last[:] = [(obs, info)]

@@ -116,6 +116,12 @@ def policy_only(checkpoint: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in checkpoint.items() if k not in ("optimizer_state_dict", "format")}
 
 
+def actor_only(checkpoint: dict[str, Any]) -> dict[str, Any]:
+    """What an agent needs of a checkpoint: kind, model, actor weights, progress and options (no critic,
+    anchor or optimizer; ~1 MB for the paper's network)."""
+    return {k: checkpoint[k] for k in ("kind", "model", "actor_state_dict", "progress", "train") if k in checkpoint}
+
+
 def build_actor(checkpoint: dict[str, Any]):
     """The policy network of a checkpoint, weights loaded, in eval mode."""
     from hbmp_bench.training.models import build_model

@@ -462,12 +462,15 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
                             keep_through=progress.iterations if resume else None, key="iteration")
         validator = Validator(run.out, run.validate_every, run.workers, env_config.kwargs.get("fidelity"),
                               resumed_at=progress.episodes if resume else None, episodes=run.validate_episodes)
-        if validator.due(progress.episodes):  # a fresh run: the initial actor is the first row
-            if run.progress:
-                print("validating the greedy policy on hbmp-val ...", flush=True)
-            row = validator(progress.episodes, checkpoint())
-            if run.progress:
-                print(f"validation at episode {progress.episodes}: success {row['success']:.1%}", flush=True)
+
+        def validate_if_due(say) -> None:
+            if validator.due(progress.episodes):
+                say(f"validating the greedy policy at episode {progress.episodes} on hbmp-val ...")
+                row = validator(progress.episodes, checkpoint())
+                say(f"validation at episode {progress.episodes}: success {row['success']:.1%} "
+                    f"(best {validator.best:.1%})")
+
+        validate_if_due(lambda text: print(text, flush=True) if run.progress else None)  # a fresh run: the init
         bar = progress_bar(run, progress.episodes)
         last_save = progress.episodes
         alg.freeze_actor(progress.episodes < ppo.critic_warmup_episodes)
@@ -490,11 +493,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
             if progress.episodes - last_save >= run.save_every:
                 save_checkpoint(run.path("checkpoint.pt"), checkpoint())
                 last_save = progress.episodes
-            if validator.due(progress.episodes):
-                bar.write(f"validating the greedy policy at episode {progress.episodes} on hbmp-val ...")
-                row = validator(progress.episodes, checkpoint())
-                bar.write(f"validation at episode {progress.episodes}: success {row['success']:.1%} "
-                          f"(best {validator.best:.1%})")
+            validate_if_due(bar.write)
             if progress.episodes >= run.episodes:
                 raise BudgetReached
 

@@ -30,11 +30,6 @@ per task, mean route completion, the episodes ending with each failure kind, how
 validation's wall time [s]."""
 
 
-def actor_only(checkpoint: dict[str, Any]) -> dict[str, Any]:
-    """What an agent needs of a PPO checkpoint: kind, model, actor weights, progress and options (~1 MB)."""
-    return {k: checkpoint[k] for k in ("kind", "model", "actor_state_dict", "progress", "train") if k in checkpoint}
-
-
 def validate(policy: str, workers: int, fidelity: str | None = None, episodes: int | None = None,
              progress: bool = False) -> dict[str, Any]:
     """Evaluate the checkpoint ``policy`` greedily on :data:`VALIDATION_SUITE`: its first ``episodes``
@@ -122,7 +117,7 @@ class Validator:
         """Validate ``checkpoint`` (the run at ``episodes``), log it, keep it as ``best.pt`` if best."""
         import tempfile
 
-        from hbmp_bench.training.checkpoints import save_checkpoint
+        from hbmp_bench.training.checkpoints import actor_only, save_checkpoint
 
         actor = actor_only(checkpoint)
         with tempfile.TemporaryDirectory(prefix="hbmp-validation-") as folder:
