@@ -159,11 +159,15 @@ def _ppo_config(args: argparse.Namespace, init: str | None):
     before any worker starts."""
     from hbmp_bench.training.ppo import PPOConfig
 
-    warmup = args.critic_warmup
-    if warmup is None:
-        warmup = CRITIC_WARMUP_EPISODES if init is not None else 0
-    ppo = PPOConfig(mask_actions=args.mask_actions, critic_warmup_episodes=warmup,
-                    **PPOConfig.parse_assignments(args.ppo))
+    assigned = PPOConfig.parse_assignments(args.ppo)
+    flags = {"critic_warmup_episodes": ("--critic-warmup", args.critic_warmup),
+             "mask_actions": ("--mask-actions", args.mask_actions or None)}
+    for name, (flag, value) in flags.items():
+        if value is not None and name in assigned and assigned[name] != value:
+            raise ValueError(f"{flag} and --ppo {name}= disagree ({value} against {assigned[name]}): give one")
+    options = {"critic_warmup_episodes": CRITIC_WARMUP_EPISODES if init is not None else 0,
+               **{name: value for name, (_, value) in flags.items() if value is not None}, **assigned}
+    ppo = PPOConfig(**options)
     if ppo.anchor_coef > 0 and init is None:
         raise ValueError("--ppo anchor_coef needs an --init actor to anchor to")
     return ppo

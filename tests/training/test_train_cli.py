@@ -142,6 +142,9 @@ def test_clear_errors(il_run, tmp_path, capsys):
     assert main(["train", "hbmp", "--ppo", "anchor_coef=1", "--init", "none", "--out", str(tmp_path / "x"),
                  *COMMON]) == 2
     assert "--init" in capsys.readouterr().err
+    assert main(["train", "hbmp", "--critic-warmup", "5", "--ppo", "critic_warmup_episodes=7", "--out",
+                 str(tmp_path / "x"), *COMMON]) == 2
+    assert "disagree" in capsys.readouterr().err and not os.path.exists(tmp_path / "x")
     assert main(["train", "hbmp", "--ppo", "anchor_coef=1", "--resume", os.path.join(il_run, "checkpoint.pt"),
                  "--out", str(tmp_path / "x"), *COMMON]) == 2
     assert "recorded" in capsys.readouterr().err
@@ -253,3 +256,20 @@ def test_the_resume_hint_is_a_command_train_accepts(tmp_path):
     assert command[command.index("--resume") + 1] == str(out / "checkpoint.pt")
     assert command[command.index("--validate-every") + 1] == "100" and command[command.index("--save-every") + 1] == "25"
     build_parser().parse_args(command[1:])
+
+
+def test_ppo_names_the_fields_of_the_dedicated_flags():
+    """``--ppo critic_warmup_episodes=N`` and ``--ppo mask_actions=true`` set what ``--critic-warmup`` and
+    ``--mask-actions`` set (it used to be a TypeError); agreeing pairs are fine."""
+    from hbmp_bench.cli import build_parser
+    from hbmp_bench.training.commands import _ppo_config
+
+    def config(*argv):
+        return _ppo_config(build_parser().parse_args(["train", "hbmp", *argv]), "il")
+
+    assert config("--ppo", "critic_warmup_episodes=7").critic_warmup_episodes == 7
+    assert config("--critic-warmup", "3").critic_warmup_episodes == 3
+    assert config("--ppo", "mask_actions=true").mask_actions
+    assert config("--mask-actions", "--ppo", "mask_actions=true").mask_actions
+    assert config().critic_warmup_episodes > 0 and _ppo_config(
+        build_parser().parse_args(["train", "hbmp"]), None).critic_warmup_episodes == 0
