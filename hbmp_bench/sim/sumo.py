@@ -20,6 +20,7 @@ module returns footprint centres.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 import socket
@@ -98,15 +99,14 @@ class Actors:
         """The actors ``actor_id`` can meet: every other one on its level (elevation within
         ``clearance_m`` [m] of its own; all others when it is absent). Its detectors, M_t and
         motion planner see these: a car on a bridge is no obstacle to one on the road below."""
-        keep = np.ones(len(self.ids), dtype=bool)
-        if actor_id in self.ids:
+        try:
             at = self.ids.index(actor_id)
-            keep = np.abs(self.z - self.z[at]) < clearance_m
-            keep[at] = False
-        if keep.all():
+        except ValueError:
             return self
+        keep = np.abs(self.z - self.z[at]) < clearance_m
+        keep[at] = False
         return Actors(
-            ids=tuple(i for i, k in zip(self.ids, keep) if k),
+            ids=tuple(itertools.compress(self.ids, keep.tolist())),
             xy=self.xy[keep],
             yaw=self.yaw[keep],
             speed=self.speed[keep],
@@ -366,12 +366,20 @@ class SumoSim:
         # a vehicle still waiting for its insertion has no valid 3D position (an invalid 2D one): not on the
         # road. Vehicles then persons, each sorted by id as libsumo gives them (TraCI keeps insertion order):
         # the same order on both paths, so sums over actors are the same to the last bit
-        results = {i: group[i] for group in (self._api.vehicle.getAllSubscriptionResults(),
-                                             self._api.person.getAllSubscriptionResults())
-                   for i in sorted(group) if len(group[i].get(pos_, ())) == 3}
-        ids = tuple(results)
+        found: list[str] = []
+        values: list[float] = []  # x, y, z, angle, speed of each found actor in turn
+        for group in (self._api.vehicle.getAllSubscriptionResults(), self._api.person.getAllSubscriptionResults()):
+            for i in sorted(group):
+                r = group[i]
+                pos = r.get(pos_, ())
+                if len(pos) == 3:
+                    found.append(i)
+                    values += pos
+                    values.append(r[angle_])
+                    values.append(r[speed_])
+        ids = tuple(found)
         k = len(ids)
-        rows = np.array([(*r[pos_], r[angle_], r[speed_]) for r in results.values()], dtype=float).reshape(k, 5)
+        rows = np.array(values, dtype=float).reshape(k, 5)
         pos, z, yaw, speed = rows[:, :2], rows[:, 2], sumo_angle_to_yaw(rows[:, 3]), rows[:, 4]
         if self._snapshot_dims is None or self._snapshot_dims[0] != ids:  # actors rarely change: cache
             dims = np.array([self._dims.get(i, (4.5, 1.8, False)) for i in ids], dtype=float).reshape(k, 3)
