@@ -27,9 +27,15 @@ class CategoricalDistribution(Distribution):
         num_categories: number of behaviors (5 in the paper's order).
         init_logit_scale: gain of the orthogonal init of the last layer; small values start the
             policy near uniform (PPO practice).
+        temperature: the distribution is ``softmax(logits / temperature)`` (1: the paper's softmax;
+            below 1 sharper, so that a policy sampled in training acts closer to its greedy self). The
+            deterministic output, the most likely behavior, does not depend on it.
     """
 
-    def __init__(self, output_dim: int = 1, num_categories: int = 5, init_logit_scale: float = 0.01) -> None:
+    def __init__(self, output_dim: int = 1, num_categories: int = 5, init_logit_scale: float = 0.01,
+                 temperature: float = 1.0) -> None:
+        if not temperature > 0:
+            raise ValueError(f"temperature must be > 0, got {temperature}")
         if output_dim != 1:
             raise ValueError(f"a categorical action is one index: output_dim must be 1, got {output_dim}")
         if num_categories < 2:
@@ -37,12 +43,13 @@ class CategoricalDistribution(Distribution):
         super().__init__(output_dim)
         self.num_categories = num_categories
         self.init_logit_scale = init_logit_scale
+        self.temperature = float(temperature)
         self._distribution: Categorical | None = None
         Categorical.set_default_validate_args(False)
 
     def update(self, mlp_output: torch.Tensor) -> None:
-        """Set the distribution from logits (batch, num_categories)."""
-        self._distribution = Categorical(logits=mlp_output)
+        """Set the distribution from logits (batch, num_categories), divided by the temperature."""
+        self._distribution = Categorical(logits=mlp_output if self.temperature == 1.0 else mlp_output / self.temperature)
 
     def sample(self) -> torch.Tensor:
         """(batch, 1) float behavior indices."""

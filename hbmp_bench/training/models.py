@@ -166,10 +166,14 @@ NETWORK = {
 policy rebuilds the same network even if the class defaults change."""
 
 
-def behavior_model_cfgs(mask_actions: bool = False, num_categories: int = 5) -> tuple[dict, dict]:
-    """rsl-rl ``actor`` and ``critic`` configs for the behavior policy (paper's network)."""
-    actor = {"class_name": MODEL_CLASS, **NETWORK,
-             "distribution_cfg": {"class_name": CATEGORICAL_CLASS, "num_categories": num_categories}}
+def behavior_model_cfgs(mask_actions: bool = False, num_categories: int = 5,
+                        temperature: float = 1.0) -> tuple[dict, dict]:
+    """rsl-rl ``actor`` and ``critic`` configs for the behavior policy (paper's network); ``temperature``:
+    the categorical's (:class:`~hbmp_bench.training.distributions.CategoricalDistribution`)."""
+    distribution = {"class_name": CATEGORICAL_CLASS, "num_categories": num_categories}
+    if temperature != 1.0:  # configs of the paper's softmax stay as they were recorded
+        distribution["temperature"] = temperature
+    actor = {"class_name": MODEL_CLASS, **NETWORK, "distribution_cfg": distribution}
     if mask_actions:
         actor["action_mask_group"] = "action_mask"
     critic = {"class_name": MODEL_CLASS, **NETWORK}

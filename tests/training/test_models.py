@@ -50,6 +50,30 @@ def test_categorical_matches_torch_distributions():
     assert dist.std.squeeze(-1) == pytest.approx(var.sqrt(), abs=1e-5)
 
 
+def test_temperature_sharpens_the_sampled_policy_and_keeps_the_greedy_one():
+    """softmax(logits / τ): below 1 the likely behavior gains, the greedy choice is the same, and the params the
+    roll-out stores (for PPO's KL) are the tempered distribution's; the actor built from a config with it
+    loads a τ = 1 actor's weights (the ``il`` initialisation)."""
+    logits = torch.randn(6, 5, generator=torch.Generator().manual_seed(3))
+    cool, plain = CategoricalDistribution(temperature=0.5), CategoricalDistribution()
+    cool.update(logits)
+    plain.update(logits)
+    assert cool.probs == pytest.approx(Categorical(logits=2 * logits).probs)
+    top = logits.argmax(-1, keepdim=True)
+    assert (cool.probs.gather(1, top) > plain.probs.gather(1, top)).all() and (cool.entropy < plain.entropy).all()
+    assert torch.equal(cool.deterministic_output(logits), plain.deterministic_output(logits))
+    assert cool.kl_divergence(cool.params, plain.params) == pytest.approx(
+        torch.distributions.kl_divergence(Categorical(logits=2 * logits), Categorical(logits=logits)), rel=1e-5)
+    with pytest.raises(ValueError, match="temperature"):
+        CategoricalDistribution(temperature=0.0)
+    with pytest.raises(ValueError, match="temperature"):
+        PPOConfig(temperature=-1.0)
+    assert "temperature" not in behavior_model_cfgs()[0]["distribution_cfg"]  # the paper's configs as recorded
+    warm = build_model(behavior_model_cfgs(temperature=0.5)[0], SHAPES, GROUPS, "actor", 1)
+    warm.load_state_dict(build_model(behavior_model_cfgs()[0], SHAPES, GROUPS, "actor", 1).state_dict())
+    assert warm.distribution.temperature == 0.5
+
+
 def test_categorical_rejects_a_vector_action():
     with pytest.raises(ValueError, match="output_dim must be 1"):
         CategoricalDistribution(output_dim=2)
