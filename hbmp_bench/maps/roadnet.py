@@ -16,6 +16,8 @@ import heapq
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from types import MappingProxyType
+from typing import Mapping
 
 import numpy as np
 
@@ -140,6 +142,7 @@ class RoadNetwork:
         import sumolib
 
         self.path = Path(net_path)
+        self._trees: dict[str, tuple[Mapping[str, float], Mapping[str, str]]] = {}
         net = sumolib.net.readNet(str(self.path), withInternal=True, withPedestrianConnections=False)
         self.lanes: dict[str, Lane] = {}
         self.edge_lanes: dict[str, tuple[str, ...]] = {}
@@ -312,13 +315,26 @@ class RoadNetwork:
         """Number of junctions where ``route`` turns left or right."""
         return sum(d in TURN_DIRECTIONS for d in self.turns(route))
 
-    def shortest_tree(self, source: str) -> tuple[dict[str, float], dict[str, str]]:
+    def shortest_tree(self, source: str) -> tuple[Mapping[str, float], Mapping[str, str]]:
         """Dijkstra from the END of ``source`` over the length driven [m]: each step onto an edge
         costs its junction lanes (the shortest link's) plus the edge's length.
 
-        Returns (dist, prev): dist[e] is the length driven from the end of ``source`` to the
+        Returns (dist, prev), read-only and computed once per source (an episode's reset draws the
+        background routes from them): dist[e] is the length driven from the end of ``source`` to the
         end of ``e``; prev links each reached edge to its predecessor.
         """
+        tree = self._trees.get(source)
+        if tree is None:
+            dist, prev = self._dijkstra(source)
+            tree = self._trees[source] = (MappingProxyType(dist), MappingProxyType(prev))
+        return tree
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state["_trees"] = {}  # read-only views do not pickle; a copy computes its own
+        return state
+
+    def _dijkstra(self, source: str) -> tuple[dict[str, float], dict[str, str]]:
         dist = {source: 0.0}
         prev: dict[str, str] = {}
         heap = [(0.0, source)]
@@ -344,7 +360,7 @@ class RoadNetwork:
                 for e in self.edge_length for nxt in self.successors(e) if self.links(e, nxt)}
 
     @staticmethod
-    def path_to(prev: dict[str, str], source: str, target: str) -> tuple[str, ...]:
+    def path_to(prev: Mapping[str, str], source: str, target: str) -> tuple[str, ...]:
         """Edge sequence from ``source`` to ``target`` read off a ``shortest_tree`` result."""
         path = [target]
         while path[-1] != source:

@@ -107,6 +107,23 @@ def test_routes_are_shortest_by_length_driven(town):
             assert ours <= theirs * 1.005, (ep.key, ours, theirs)
 
 
+def test_shortest_trees_are_computed_once_read_only_and_pickle():
+    """A reset draws background routes from shortest trees: each source's is computed once, shared read-only
+    (a caller cannot corrupt the next one's), and a network still pickles (the copy computes its own)."""
+    import pickle
+
+    net = road_network("Town01")
+    source = net.drivable_edges[0]
+    dist, prev = net.shortest_tree(source)
+    assert net.shortest_tree(source)[0] is dist
+    with pytest.raises(TypeError):
+        dist[source] = 1.0
+    fresh = RoadNetwork(net_path("Town01"))._dijkstra(source)
+    assert (dict(dist), dict(prev)) == fresh
+    copy = pickle.loads(pickle.dumps(net))
+    assert dict(copy.shortest_tree(source)[0]) == dict(dist)
+
+
 def test_route_lanes_reach_a_goal_lane_that_leaves_no_room_to_change():
     """Town03's roundabout: ring segments of 12.5-16 m leave no room for a lane change, so from the
     ring's entry on only the lanes whose links land on the goal lane lead to it; before a long
