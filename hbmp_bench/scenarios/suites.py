@@ -100,14 +100,15 @@ register_suite(
         name="hbmp-val",
         towns=("Town03",),
         tasks=("Navigation", "NavigationDynamic"),
-        episodes_per_task=20,
+        episodes_per_task=50,
         seed=3,
         end_on_violation=True,
         timeout_speed_kmh=5.0,
         timeout_extra_s=20.0,
-        description="Validation, not a test: 20 Navigation and 20 Navigation dynamic episodes of the training "
+        description="Validation, not a test: 50 Navigation and 50 Navigation dynamic episodes of the training "
         "town Town03 under the hbmp suite's rules, drawn from their own seed, on which PPO runs choose among "
-        "their checkpoints (train --validate-every); report results on hbmp, corl2017 or nocrash-*.",
+        "their checkpoints (train --validate-every, on the first 20 per task unless --validate-episodes says "
+        "more); report results on hbmp, corl2017 or nocrash-*.",
     )
 )
 for _density in ("empty", "regular", "dense"):

@@ -253,10 +253,10 @@ def add_commands(subparsers) -> None:
                         "(defaults: the paper's values, rsl-rl's where it gives none)")
     p.add_argument("--save-every", type=int, default=SAVE_EVERY, help="checkpoint every N episodes")
     p.add_argument("--validate-every", type=int, default=0, metavar="N",
-                   help="PPO: every N episodes, evaluate the greedy policy on the hbmp-val suite (40 held-out "
+                   help="PPO: every N episodes, evaluate the greedy policy on the hbmp-val suite (held-out "
                         "Town03 episodes) into validation.csv and keep the best as best.pt; 0: never")
     p.add_argument("--validate-episodes", type=int, default=None, metavar="N",
-                   help="with --validate-every: the first N validation episodes per task (default: all 20)")
+                   help="with --validate-every: the first N validation episodes per task, up to 50 (default: 20)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_train)
 

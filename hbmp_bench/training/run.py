@@ -47,7 +47,7 @@ class RunConfig:
         torch_threads: torch intra-op threads of the trainer (None: cores left by the workers, >= 1).
         validate_every: PPO: evaluate the greedy policy on the ``hbmp-val`` suite every this many
             episodes and keep the best as ``best.pt`` (0: never; see :mod:`hbmp_bench.training.validation`).
-        validate_episodes: the first this many episodes per task of ``hbmp-val`` (None: all 20).
+        validate_episodes: the first this many episodes per task of ``hbmp-val`` (None: 20 of its 50).
     """
 
     kind: str

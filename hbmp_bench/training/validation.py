@@ -7,12 +7,13 @@ the ``hbmp`` suite's Town03 Navigation episodes), so the sampled curve cannot sa
 improved the greedy policy, nor which checkpoint to ship.
 
 Every ``validate_every`` episodes the run evaluates its current actor on the ``hbmp-val`` suite
-(Town03 Navigation and Navigation dynamic, 20 each, the paper's protocol, episodes drawn from their own
-seed: not the test suites' episodes) with the package's evaluator (isolated processes, as ``evaluate``
+(Town03 Navigation and Navigation dynamic, the first 20 of 50 each unless told, the paper's protocol,
+episodes drawn from their own seed: not the test suites' episodes) with the package's evaluator (isolated
+processes, as ``evaluate``
 runs agents), appends a row to ``validation.csv`` and writes the actor to ``best.pt`` when its success
 is the best so far (ties: the later one). A fresh run validates its initial actor first (episode 0), so
-the ``il`` baseline is the first row. The training workers wait meanwhile; 40 continuous episodes took
-4-7 min on a 2-core machine that ran other work beside.
+the ``il`` baseline is the first row. The training workers wait meanwhile; 40 continuous episodes take
+41-57 s with 2 slots on a quiet 2-core machine (4-7 min where other work ran beside).
 """
 
 from __future__ import annotations
@@ -30,10 +31,16 @@ per task, mean route completion, the episodes ending with each failure kind, how
 validation's wall time [s]."""
 
 
+DEFAULT_EPISODES_PER_TASK = 20
+"""Validation episodes per task unless a run says otherwise: ``hbmp-val`` has 50 per task, drawn one generator
+per episode, so its first 20 are the episodes it had when it had 20 (every earlier ``validation.csv``)."""
+
+
 def validate(policy: str, workers: int, fidelity: str | None = None, episodes: int | None = None,
              progress: bool = False) -> dict[str, Any]:
     """Evaluate the checkpoint ``policy`` greedily on :data:`VALIDATION_SUITE`: its first ``episodes``
-    episodes per task (None: all), in ``workers`` evaluation slots, in ``fidelity`` (None: the default).
+    episodes per task (None: :data:`DEFAULT_EPISODES_PER_TASK`), in ``workers`` evaluation slots, in
+    ``fidelity`` (None: the default).
 
     Returns the columns of :data:`VALIDATION_COLUMNS` but ``episode``.
     """
@@ -44,7 +51,7 @@ def validate(policy: str, workers: int, fidelity: str | None = None, episodes: i
 
     suite = get_suite(VALIDATION_SUITE)
     start = time.perf_counter()
-    count = suite.episodes_per_task if episodes is None else min(episodes, suite.episodes_per_task)
+    count = min(DEFAULT_EPISODES_PER_TASK if episodes is None else episodes, suite.episodes_per_task)
     jobs = [Job(suite.name, town, task, policy, tuple(range(count)), fidelity)
             for town in suite.towns for task in suite.tasks]
     records = run_jobs(jobs, workers=workers, progress=progress)
@@ -89,7 +96,7 @@ class Validator:
         out: the run folder.
         every: validate every this many episodes (0: never).
         workers: evaluation slots.
-        episodes: validation episodes per task (None: all).
+        episodes: validation episodes per task (None: :data:`DEFAULT_EPISODES_PER_TASK`).
         fidelity: the training env's fidelity.
         resumed_at: the episode count a resumed run continues from (rows after it are dropped); None
             for a fresh run.

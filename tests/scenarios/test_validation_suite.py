@@ -1,6 +1,9 @@
 """hbmp-val: the training town's validation episodes are not the test suites' episodes."""
 
+import dataclasses
+
 from hbmp_bench.scenarios import get_suite, suite_episodes
+from hbmp_bench.scenarios.suites import SUITES, episode_list
 
 
 def test_validation_episodes_are_held_out_from_every_test_suite():
@@ -18,3 +21,15 @@ def test_validation_episodes_are_held_out_from_every_test_suite():
             test = {(e.start_lane, round(e.start_pos, 1), e.goal_lane, round(e.goal_pos, 1))
                     for e in suite_episodes(suite, "Town03", task)}
             assert not held & test, f"hbmp-val {task} shares episodes with {suite}"
+
+
+def test_the_first_20_validation_episodes_are_those_of_the_20_episode_suite(monkeypatch):
+    """hbmp-val grew from 20 to 50 episodes per task; runs validate on the first 20 by default, which must be
+    the episodes every earlier validation.csv was measured on (each episode draws from its own generator)."""
+    short = dataclasses.replace(get_suite("hbmp-val"), episodes_per_task=20)
+    monkeypatch.setitem(SUITES, "hbmp-val", short)
+    before = [e for task in short.tasks for e in episode_list("hbmp-val", "Town03", task)]
+    monkeypatch.undo()
+    now = {task: episode_list("hbmp-val", "Town03", task) for task in short.tasks}
+    assert all(len(eps) == 50 for eps in now.values())
+    assert before == [e for task in short.tasks for e in now[task][:20]]
