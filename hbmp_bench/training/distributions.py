@@ -99,8 +99,11 @@ class CategoricalDistribution(Distribution):
         return self._distribution.log_prob(outputs.squeeze(-1).round().long())  # type: ignore[union-attr]
 
     def kl_divergence(self, old_params: tuple[torch.Tensor, ...], new_params: tuple[torch.Tensor, ...]) -> torch.Tensor:
-        """(batch,) KL(old || new)."""
-        return torch.distributions.kl_divergence(Categorical(logits=old_params[0]), Categorical(logits=new_params[0]))
+        """(batch,) KL(old || new), from log-probabilities: finite where one side's probability underflows to 0
+        and the other's does not (torch's categorical KL is inf there; sharp policies, e.g. at a temperature
+        below 1, logged an infinite KL to the ``il`` anchor)."""
+        old, new = torch.log_softmax(old_params[0], dim=-1), torch.log_softmax(new_params[0], dim=-1)
+        return (old.exp() * (old - new)).sum(-1)
 
     def init_mlp_weights(self, mlp: nn.Module) -> None:
         """Near-uniform start: small orthogonal init of the logits layer."""

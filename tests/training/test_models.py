@@ -64,6 +64,10 @@ def test_temperature_sharpens_the_sampled_policy_and_keeps_the_greedy_one():
     assert torch.equal(cool.deterministic_output(logits), plain.deterministic_output(logits))
     assert cool.kl_divergence(cool.params, plain.params) == pytest.approx(
         torch.distributions.kl_divergence(Categorical(logits=2 * logits), Categorical(logits=logits)), rel=1e-5)
+    sharp, wide = torch.tensor([[0.0, -60.0, -120.0, 0.0, 0.0]]), torch.tensor([[0.0, -40.0, -50.0, 0.0, 0.0]])
+    cool.update(sharp)  # exp(-240) underflows in float32: torch's categorical KL would be inf
+    kl = cool.kl_divergence((wide,), cool.params)
+    assert torch.isfinite(kl).all() and kl.item() > 0
     with pytest.raises(ValueError, match="temperature"):
         CategoricalDistribution(temperature=0.0)
     with pytest.raises(ValueError, match="temperature"):
