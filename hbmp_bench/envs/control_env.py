@@ -89,7 +89,7 @@ class ControlEnv(gym.Env):
         obs, infos = self.parallel.reset(seed=seed, options=options)
         driver, ego = self.world.ego_driver, self.world.ego
         driver.path = driver.lane_path(ego.followed_lane, ego.next_edges(), ego.next_lanes())
-        return self._extend(obs[EGO_ID]), infos[EGO_ID]
+        return self._extend(obs[EGO_ID]), self._without_behaviors(infos[EGO_ID])
 
     def step(self, action):
         if EGO_ID not in self.parallel.agents:
@@ -99,11 +99,17 @@ class ControlEnv(gym.Env):
             raise ValueError(f"action must be 2 finite numbers [accel, steer] in [-1, 1], got {action!r}")
         self.world.ego_driver.set_control(action)
         obs, rewards, terms, truncs, infos = self.parallel.step({EGO_ID: int(Behavior.KEEP)})
-        info = infos[EGO_ID]
-        for key in ("behavior", "behavior_executed", "action_mask"):
-            info.pop(key, None)
+        info = self._without_behaviors(infos[EGO_ID])
         info["control"] = action.tolist()
         return self._extend(obs[EGO_ID]), rewards[EGO_ID], terms[EGO_ID], truncs[EGO_ID], info
+
+    @staticmethod
+    def _without_behaviors(info: dict) -> dict:
+        """``info`` without the behavior layer's keys: this env has no behaviors to choose or mask (a reset's
+        info kept ``action_mask`` once, and a training batch mixing a reset and a step could not be stacked)."""
+        for key in ("behavior", "behavior_executed", "action_mask"):
+            info.pop(key, None)
+        return info
 
     def render(self):
         return self.parallel.render()

@@ -112,7 +112,11 @@ class WorkerVecEnv(VecEnv):
             key: torch.as_tensor(np.stack([r.obs[key] for r in replies]), dtype=torch.float32, device=self.device)
             for key in replies[0].obs
         }
-        if replies[0].action_mask is not None:
+        masked = [r.action_mask is not None for r in replies]
+        if any(masked) and not all(masked):
+            raise RuntimeError(f"workers disagree on the action mask (present in {sum(masked)} of {len(masked)} "
+                               "replies): an env's reset and step infos must both have it or both lack it")
+        if all(masked):
             groups["action_mask"] = torch.as_tensor(np.stack([r.action_mask for r in replies]),
                                                     dtype=torch.float32, device=self.device)
         return TensorDict(groups, batch_size=[self.num_envs], device=self.device)

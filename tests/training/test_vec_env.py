@@ -94,3 +94,22 @@ def test_training_reward_modes():
     assert training_reward("env", 7.0, info, scale=0.01) == pytest.approx(0.07)
     with pytest.raises(ValueError, match="reward"):
         WorkerEnvConfig(reward="shaped")
+
+
+def test_replies_that_disagree_on_the_action_mask_are_a_clear_error():
+    """A batch mixing a reset (which had an action mask) and a step (which had none) used to die in np.stack
+    with a shape message; the flat baseline's 2-worker training did, at its first auto-reset."""
+    import numpy as np
+
+    from hbmp_bench.training.vec_env import WorkerVecEnv
+    from hbmp_bench.training.worker import StepReply
+
+    env = WorkerVecEnv.__new__(WorkerVecEnv)
+    env.device, env.num_envs = "cpu", 2
+    obs = {"road": np.zeros(3, np.float32)}
+    stacked = env._stack_obs([StepReply(obs), StepReply(obs)])
+    assert set(stacked.keys()) == {"road"}
+    both = env._stack_obs([StepReply(obs, action_mask=np.ones(5, np.int8))] * 2)
+    assert both["action_mask"].shape == (2, 5)
+    with pytest.raises(RuntimeError, match="disagree on the action mask"):
+        env._stack_obs([StepReply(obs, action_mask=np.ones(5, np.int8)), StepReply(obs)])
