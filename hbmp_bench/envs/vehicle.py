@@ -377,12 +377,14 @@ class GoalRoute:
         k = self._pos.get(edge)
         if k is None or k + 1 >= len(self.edges) or lane in net.lanes_to(edge, self.edges[k + 1]):
             return
-        options = net.lane_next.get(lane, ())
-        if not options:
+        # the edges this lane leads onto by a link a car may drive (every route takes only those:
+        # ``RoadNetwork.links``); a sharper link SUMO has would leave the route without a path
+        onto = [to for _, to in net.lane_next.get(lane, ()) if lane in net.lanes_to(edge, to)]
+        if not onto:
             return
         goal_edge = self.edges[-1]
         try:
-            onward = net.shortest_route(options[0][1], goal_edge)
+            onward = net.shortest_route(onto[0], goal_edge)
         except (KeyError, ValueError):
             return
         new_route = (*self.edges[:k + 1], *onward)

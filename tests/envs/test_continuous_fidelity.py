@@ -117,3 +117,30 @@ def test_route_is_replanned_only_once_lane_changes_are_closed():
     env.close()
     assert route.reroutes == 1 and route.edges[0] == original[0] and route.edges[1] != original[1]
     assert route.edges[-1] == original[-1]  # still to the same goal edge
+
+
+def test_no_reroute_over_a_link_too_sharp_to_drive():
+    """Town03's lane X230_235_NE_1 leads only onto -Pr235_NE, by a link sharper than routes take
+    (``RoadNetwork.links``). A policy that stayed in it to its end got the route re-planned over that link, and
+    building the new route's path raised ValueError inside env.step (a random-init PPO worker died of it): the
+    route now stays, as where a lane leads nowhere."""
+    from types import SimpleNamespace
+
+    from hbmp_bench.envs.vehicle import GoalRoute
+    from hbmp_bench.scenarios import road_network
+
+    net = road_network("Town03")
+    edge, lane = "X230_235_NE", "X230_235_NE_1"
+    assert net.lane_next[lane] and not any(lane in net.lanes_to(edge, to) for _, to in net.lane_next[lane])
+    route = net.shortest_route(edge, "NE_Pt230")
+    goal_lane = net.edge_lanes[route[-1]][0]
+    episode = SimpleNamespace(route=route, start_lane=net.edge_lanes[edge][-1], goal_lane=goal_lane,
+                              goal_pos=net.lane(goal_lane).length / 2)
+    sim = SimpleNamespace(set_route=lambda vehicle_id, edges: True)
+    vehicle = SimpleNamespace(id="ego", followed_lane=lane, shared=SimpleNamespace(net=net, sim=sim),
+                              state=SimpleNamespace(lane=lane, lane_pos=net.lane(lane).length - 1.0))
+    goal = GoalRoute(episode, "continuous")
+    goal.v = vehicle
+    goal._set(route)
+    goal.keep()
+    assert goal.edges == route and goal.reroutes == 0
