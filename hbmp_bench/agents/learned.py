@@ -119,12 +119,14 @@ class LearnedAgent:
         return np.clip(out.cpu().numpy(), -1.0, 1.0).astype(np.float32)
 
     def behavior_probabilities(self, observation: dict[str, Any], info: dict[str, Any]) -> np.ndarray:
-        """(5,) the policy's behavior probabilities (behavior policies only)."""
+        """(5,) the policy's behavior probabilities (behavior policies only): its own distribution's, so a
+        policy trained at a sampling temperature reports the probabilities it was trained with."""
         if not self.discrete:
             raise ValueError(f"{self.kind!r} is not a behavior policy")
         with self._torch.inference_mode():
-            logits = self.actor.distribution_input(self._batch(observation, info))[0]
-        return self._torch.softmax(logits, -1).cpu().numpy()
+            distribution = self.actor.distribution
+            distribution.update(self.actor.distribution_input(self._batch(observation, info)))
+            return distribution.probs[0].cpu().numpy()
 
 
 def _shipped(name: str):

@@ -49,7 +49,7 @@ class CategoricalDistribution(Distribution):
 
     def update(self, mlp_output: torch.Tensor) -> None:
         """Set the distribution from logits (batch, num_categories), divided by the temperature."""
-        self._distribution = Categorical(logits=mlp_output if self.temperature == 1.0 else mlp_output / self.temperature)
+        self._distribution = Categorical(logits=mlp_output / self.temperature)  # exact at 1
 
     def sample(self) -> torch.Tensor:
         """(batch, 1) float behavior indices."""
@@ -102,8 +102,9 @@ class CategoricalDistribution(Distribution):
         """(batch,) KL(old || new), from log-probabilities: finite where one side's probability underflows to 0
         and the other's does not (torch's categorical KL is inf there; sharp policies, e.g. at a temperature
         below 1, logged an infinite KL to the ``il`` anchor)."""
-        old, new = torch.log_softmax(old_params[0], dim=-1), torch.log_softmax(new_params[0], dim=-1)
-        return (old.exp() * (old - new)).sum(-1)
+        old, new = Categorical(logits=old_params[0]), Categorical(logits=new_params[0])
+        terms = old.probs * (old.logits - new.logits)  # torch's own terms, without its inf where new.probs == 0
+        return torch.where(old.probs == 0, 0.0, terms).sum(-1)
 
     def init_mlp_weights(self, mlp: nn.Module) -> None:
         """Near-uniform start: small orthogonal init of the logits layer."""

@@ -51,7 +51,8 @@ Deviations from the paper, and why:
   in training succeeds in ~55 %: most training failures are exploration the evaluated policy never
   does, and PPO improved the sampled policy while the greedy one wandered (``training_runs/hbmp-rules11``,
   ``hbmp-rev01``). With τ < 1 the roll-outs act closer to the greedy policy, so PPO learns from the
-  failures of the policy that is evaluated.
+  failures of the policy that is evaluated. Measured at τ = 0.5 (``training_runs/hbmp-t05``): the sampled
+  il succeeds in 84 % of the training episodes, and PPO did not raise that in 350 episodes.
 - Critic warm-up (not in the paper): with an IL initialisation the actor starts good and the critic
   random, and PPO's first updates would follow the random critic's advantages away from the IL
   policy. For the first ``critic_warmup_episodes`` the actor's learning rate is 0, so only the
@@ -440,7 +441,8 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
         if ppo.mask_actions and not discrete:
             raise ValueError("mask_actions needs a behavior env with an action mask")
         if ppo.temperature != 1.0 and not discrete:
-            raise ValueError("temperature is the behavior policy's (a categorical); the flat baseline's controls are Gaussian")
+            raise ValueError("temperature is the behavior policy's (a categorical); "
+                             "the flat baseline's controls are Gaussian")
         actor_cfg, critic_cfg = (behavior_model_cfgs(ppo.mask_actions, temperature=ppo.temperature) if discrete
                                  else control_model_cfgs(ppo.init_std))
         cfg = ppo.runner_cfg(env.num_envs, {"actor": groups, "critic": groups}, actor_cfg, critic_cfg)

@@ -9,8 +9,7 @@ improved the greedy policy, nor which checkpoint to ship.
 Every ``validate_every`` episodes the run evaluates its current actor on the ``hbmp-val`` suite
 (Town03 Navigation and Navigation dynamic, the first 20 of 50 each unless told, the paper's protocol,
 episodes drawn from their own seed: not the test suites' episodes) with the package's evaluator (isolated
-processes, as ``evaluate``
-runs agents), appends a row to ``validation.csv`` and writes the actor to ``best.pt`` when its success
+processes, as ``evaluate`` runs agents), appends a row to ``validation.csv`` and writes the actor to ``best.pt`` when its success
 is the best so far (ties: the later one). A fresh run validates its initial actor first (episode 0), so
 the ``il`` baseline is the first row. The training workers wait meanwhile; 40 continuous episodes take
 41-57 s with 2 slots on a quiet 2-core machine (4-7 min where other work ran beside).
