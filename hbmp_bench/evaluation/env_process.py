@@ -1,8 +1,8 @@
 """The env process of an episode pool slot: it owns the simulation and asks the agent process for actions.
 
 Protocol with the pool (tuples on one duplex pipe; the pool is trusted):
-    pool → env  ``("run", EpisodeTask)`` followed by the descriptor of a fresh agent channel
-                (``multiprocessing.reduction.send_handle``), or ``("stop", None)``;
+    pool → env  ``("run", (EpisodeTask, env factory, env options))`` followed by the descriptor of a
+                fresh agent channel                (``multiprocessing.reduction.send_handle``), or ``("stop", None)``;
     env → pool  ``("beat", None)`` once started, then while an episode makes progress or waits
                 for the agent (about every 0.5 s), then ``("done", outcome dict)``.
 
@@ -136,19 +136,17 @@ class _AgentLink:
 
 
 class _EnvSlot:
-    """One env kept across episodes of the same (suite, town, task, fidelity)."""
+    """One env kept across episodes of the same (suite, town, task, fidelity, env factory and options)."""
 
-    def __init__(self, factory: str | None, env_kwargs: dict | None = None):
-        self.factory = factory
-        self.env_kwargs = env_kwargs or {}
+    def __init__(self):
         self.env = None
         self.key: tuple | None = None
 
-    def get(self, task: EpisodeTask):
-        key = (task.suite, task.town, task.task, task.fidelity)
+    def get(self, task: EpisodeTask, factory: str | None, env_kwargs: tuple = ()):
+        key = (task.suite, task.town, task.task, task.fidelity, factory, tuple(env_kwargs))
         if key != self.key:
             self.close()
-            self.env = build_env(task, self.factory, self.env_kwargs)
+            self.env = build_env(task, factory, dict(env_kwargs))
             self.key = key
         return self.env
 
@@ -176,8 +174,11 @@ class _Numbered:
         return action
 
 
-def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits: RunnerLimits, beat) -> dict:
-    """Run one episode; returns the outcome dict sent to the pool (record, status, restart, timings)."""
+def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits: RunnerLimits, beat,
+                factory: str | None = None, env_kwargs: tuple = ()) -> dict:
+    """Run one episode in the env ``factory(**env_kwargs)`` (None: ``BehaviorEnv``; chosen by the
+    pool, never by the agent process); returns the outcome dict sent to the pool (record, status,
+    restart, timings)."""
     times: list[float] = []
 
     def outcome(record: EpisodeRecord, status: str, restart: bool) -> dict:
@@ -192,7 +193,7 @@ def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits
     except AgentFailure as exc:
         return outcome(blank_record(task, AGENT_ERROR, str(exc)), AGENT_ERROR, False)
     try:
-        env = env_slot.get(task)
+        env = env_slot.get(task, factory, env_kwargs)
     except Exception:  # noqa: BLE001
         return outcome(blank_record(task, SIM_ERROR, "env reset raised:\n" + traceback.format_exc(limit=-8)), SIM_ERROR, True)
     beat(force=True)
@@ -228,7 +229,7 @@ def env_main(pool_conn: Connection, limits: RunnerLimits, lifeline: Connection,
     adopt_environment(environ)
     import hbmp_bench.envs.behavior_env  # noqa: F401  (imported before the first heartbeat)
 
-    env_slot = _EnvSlot(limits.env_factory, dict(limits.env_kwargs))
+    env_slot = _EnvSlot()
     last_beat = [time.monotonic()]
 
     def beat(force: bool = False) -> None:
@@ -246,9 +247,10 @@ def env_main(pool_conn: Connection, limits: RunnerLimits, lifeline: Connection,
                 return
             if kind != "run":
                 return
+            task, factory, env_kwargs = payload
             end = channel.EnvEnd(channel.socket_from(reduction.recv_handle(pool_conn)), beat, BEAT_PERIOD_S)
             try:
-                done = run_episode(payload, env_slot, _AgentLink(end, limits), limits, beat)
+                done = run_episode(task, env_slot, _AgentLink(end, limits), limits, beat, factory, env_kwargs)
             finally:
                 end.close()
             pool_conn.send(("done", done))

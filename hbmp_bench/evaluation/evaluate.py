@@ -22,7 +22,7 @@ import functools
 
 import os
 import time
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,17 +30,12 @@ from hbmp_bench.errors import Interrupted, UnknownNameError, UserError
 from hbmp_bench.evaluation.channel import AgentDescription
 from hbmp_bench.evaluation.integrity import RecordsLedger, records_lock
 from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool, describe_agent
-from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, agent_slug, suite_tasks
+from hbmp_bench.evaluation.tasks import (AGENT_ENV_FACTORIES, EpisodeTask, RunnerLimits, agent_slug, is_privileged,  # noqa: F401
+                                         suite_tasks, with_agent_env)
 from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, EpisodeRecord, latest_per_key, repair_records
 
 BACKENDS = ("process", "ray")
 """``process``: an ``EpisodePool`` on this machine; ``ray``: Ray actors (local or a cluster)."""
-
-AGENT_ENV_FACTORIES = ("hbmp_bench.envs.control_env:ControlEnv",)
-"""Envs an agent may ask for besides the behavior env (the flat baseline's control env). Only the
-evaluator (``RunnerLimits.env_factory``) may name another: an agent naming its own module would
-run its code in the env process."""
-
 
 @dataclass(frozen=True)
 class EvaluationResult:
@@ -103,12 +98,15 @@ def iter_outcomes(
     address: str | None = None,
     limits: RunnerLimits | None = None,
     progress: bool = True,
+    descriptions: Mapping[str, AgentDescription] | None = None,
 ) -> Iterator[EpisodeOutcome]:
     """Outcomes of ``tasks`` as they finish, with a progress bar showing the running success rate.
+    Each agent's episodes run in the env it asks for (see ``EpisodePool``).
 
     Args:
         workers: parallel slots (default: one per core for ``process``, the cluster's CPUs for ``ray``).
         backend: one of ``BACKENDS``; ``address`` is the Ray cluster (None: a local instance).
+        descriptions: agents already described (``describe_agent``), by name.
     """
     from tqdm import tqdm
 
@@ -123,9 +121,9 @@ def iter_outcomes(
         if backend == "ray":
             from hbmp_bench.evaluation.ray_backend import ray_imap
 
-            source = ray_imap(tasks, limits, workers=workers, address=address)
+            source = ray_imap(tasks, limits, workers=workers, address=address, descriptions=descriptions)
         else:
-            pool = EpisodePool(min(workers or os.cpu_count() or 1, len(tasks)), limits)
+            pool = EpisodePool(min(workers or os.cpu_count() or 1, len(tasks)), limits, descriptions=descriptions)
             source = pool_imap(pool, tasks)
         for n, outcome in enumerate(source, start=1):
             successes += outcome.record.success
@@ -155,7 +153,6 @@ def evaluate(
     address: str | None = None,
     limits: RunnerLimits | None = None,
     progress: bool = True,
-    check_agent: bool = True,
 ) -> EvaluationResult:
     """Evaluate ``agent`` on a suite selection, resuming from the records file.
 
@@ -165,9 +162,9 @@ def evaluate(
         workers / backend / address: see ``iter_outcomes``.
         limits: timeouts, watchdog and retries; ``max_decisions`` is refused (capped episodes
             are no evaluation).
-        check_agent: build the agent once first (in a sandboxed agent process, see
-            ``describe_agent``), so a bad name fails before any episode, and take its env needs
-            and checkpoint fingerprint from it.
+
+    The agent is built once first (in a sandboxed agent process, see ``describe_agent``), so a
+    bad name fails before any episode; its env needs and checkpoint fingerprint come from it.
 
     Every option is checked before anything is written. Ctrl-C (``KeyboardInterrupt``) ends the
     episodes in flight and their processes, keeps every finished record, and raises
@@ -181,11 +178,9 @@ def evaluate(
         raise UnknownNameError("backend", backend, BACKENDS)
     _check_workers(workers)
     selection = suite_tasks(suite, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity)
-    fingerprint = ""
-    if check_agent:
-        description = describe_agent(agent, limits)
-        limits = with_agent_env(limits, description)
-        fingerprint = description.fingerprint
+    description = describe_agent(agent, limits)
+    limits = with_agent_env(limits, description)
+    fingerprint = description.fingerprint
     path = Path(path) if path is not None else records_path(out_dir, selection[0].suite, agent)
     path.parent.mkdir(parents=True, exist_ok=True)
     with records_lock(path):
@@ -198,7 +193,7 @@ def evaluate(
         ran = 0
         try:
             for outcome in iter_outcomes(todo, workers=workers, backend=backend, address=address, limits=limits,
-                                         progress=progress):
+                                         progress=progress, descriptions={agent: description}):
                 ledger.append(outcome.record)
                 ran += 1
         except KeyboardInterrupt:  # the pool has ended its processes on the way out
@@ -259,41 +254,3 @@ def check_provenance(path: Path, agent: str, fingerprint: str, towns: Sequence[s
         tmp = side.with_name(side.name + ".tmp")
         tmp.write_text(json.dumps(merged, indent=2, sort_keys=True) + "\n")
         os.replace(tmp, side)
-
-
-def is_privileged(limits: RunnerLimits) -> bool:
-    """Whether envs made with ``limits`` give the agent the privileged scene fields."""
-    from hbmp_bench.agents.base import PRIVILEGED_OPTION
-
-    return dict(limits.env_kwargs).get(PRIVILEGED_OPTION) is True
-
-
-def with_agent_env(limits: RunnerLimits, agent: AgentDescription) -> RunnerLimits:
-    """``limits`` with the env the agent asks for: an agent may name an ``env_factory`` from
-    ``AGENT_ENV_FACTORIES`` (the flat baseline's control env) and ``env_kwargs`` that change what
-    its policy sees (``agents.learned.OBSERVATION_OPTIONS``: the observation kind it was trained
-    with) or ``privileged`` (``agents.base.PRIVILEGED_OPTION``: the privileged scene fields, which
-    any agent may ask for; its results are then marked privileged, see :func:`is_privileged`).
-    Anything else is refused with ValueError: an agent must not pick an easier env or run its own
-    code in the env process. Explicit limits win."""
-    from hbmp_bench.agents.base import PRIVILEGED_OPTION
-    from hbmp_bench.agents.learned import OBSERVATION_OPTIONS
-
-    if agent.env_factory is not None and agent.env_factory not in AGENT_ENV_FACTORIES:
-        raise ValueError(f"the agent asks for env_factory {agent.env_factory!r}; an agent may only ask for "
-                         f"{list(AGENT_ENV_FACTORIES)} (the evaluator can set another with RunnerLimits.env_factory)")
-    allowed = (*OBSERVATION_OPTIONS, PRIVILEGED_OPTION)
-    unknown = sorted(k for k, _ in agent.env_kwargs if k not in allowed)
-    if unknown:
-        raise ValueError(f"the agent asks for env options {unknown}; an agent may only set {list(allowed)}")
-    from hbmp_bench.envs.config import WorldConfig
-    from hbmp_bench.envs.observation import ObservationConfig
-
-    asked = dict(agent.env_kwargs)
-    if "observation" in asked or "road_profile" in asked:  # checked here: not a sim_error in every episode
-        ObservationConfig(kind=asked.get("observation", "deformed"), road=asked.get("road_profile", "paper"))
-    if PRIVILEGED_OPTION in asked:
-        WorldConfig(privileged=asked[PRIVILEGED_OPTION])
-    factory = limits.env_factory or agent.env_factory
-    kwargs = {**dict(agent.env_kwargs), **dict(limits.env_kwargs)}
-    return dataclasses.replace(limits, env_factory=factory, env_kwargs=tuple(kwargs.items()))

@@ -26,7 +26,7 @@ import signal
 import socket
 import time
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from multiprocessing import reduction
 from multiprocessing.connection import Connection, wait
@@ -36,7 +36,7 @@ from hbmp_bench.evaluation import channel
 from hbmp_bench.evaluation.agent_process import agent_main
 from hbmp_bench.evaluation.env_process import blank_record, env_main
 from hbmp_bench.evaluation.sandbox import agent_account, kill_session, protect_process, reap_orphans
-from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits
+from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, with_agent_env
 from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, EpisodeRecord
 
 POLL_S = 0.2
@@ -229,9 +229,10 @@ class _Slot:
         env_pool_end.close()
         self.conn = pool_end
 
-    def run(self, task: EpisodeTask) -> None:
-        """Start the episode's agent process and hand the env process the task and its channel end
-        (a dead env process shows as EOF on ``conn``)."""
+    def run(self, task: EpisodeTask, env: RunnerLimits) -> None:
+        """Start the episode's agent process and hand the env process the task, the env to run it
+        in (``env.env_factory`` and ``env.env_kwargs``) and the agent's channel end (a dead env
+        process shows as EOF on ``conn``)."""
         if not self.alive:
             self.start()
         self.task = task
@@ -239,7 +240,7 @@ class _Slot:
         env_sock, agent_sock = socket.socketpair()
         try:
             self.agent_proc = start_agent(self.ctx, task.agent, agent_sock, self.life_r, self.limits)
-            self.conn.send(("run", task))
+            self.conn.send(("run", (task, env.env_factory, env.env_kwargs)))
             reduction.send_handle(self.conn, env_sock.fileno(), self.env_proc.pid)
         except OSError:
             pass
@@ -293,20 +294,49 @@ class EpisodePool:
     Creating a pool makes the calling process non-dumpable for the rest of its life (see
     ``sandbox_context``).
 
+    Each agent's episodes run in the env it asks for (``tasks.with_agent_env``: the flat
+    baseline's control env, a learned agent's observation options, the expert's privileged
+    fields). The pool learns what an agent asks for by building it once in a sandboxed agent
+    process (``describe_agent``) before its first episode, unless ``descriptions`` says it; an
+    agent that cannot be built runs in ``limits``' env and fails as ``agent_error`` where it runs,
+    one that asks for an env it may not have gets ``agent_error`` records without running.
+
     Args:
         workers: number of slots (each an env process, plus an agent process per episode).
-        limits: timeouts, watchdog, retries and the agent sandbox's limits.
+        limits: timeouts, watchdog, retries and the agent sandbox's limits; its ``env_factory``
+            and ``env_kwargs`` win over what agents ask for.
         start_method: multiprocessing start method (default ``default_start_method()``); never
             ``fork``, which would copy the caller's threads and simulation state.
+        descriptions: agents already described (by name), e.g. by ``evaluate``, which builds
+            the agent first to check it.
     """
 
-    def __init__(self, workers: int = 1, limits: RunnerLimits | None = None, start_method: str | None = None):
+    def __init__(self, workers: int = 1, limits: RunnerLimits | None = None, start_method: str | None = None,
+                 descriptions: Mapping[str, channel.AgentDescription] | None = None):
         if workers <= 0:
             raise ValueError(f"workers must be > 0, got {workers}")
         self.workers = workers
         self.limits = limits or RunnerLimits()
         self.ctx = sandbox_context(start_method, self.limits)
         self._slots: list[_Slot] = []
+        self._envs: dict[str, RunnerLimits | str] = {}
+        for agent, description in (descriptions or {}).items():
+            self._envs[agent] = self._env_of(description)
+
+    def _env_of(self, description: channel.AgentDescription) -> RunnerLimits | str:
+        try:
+            return with_agent_env(self.limits, description)
+        except ValueError as exc:
+            return str(exc)
+
+    def agent_env(self, agent: str) -> RunnerLimits | str:
+        """``limits`` with the env ``agent``'s episodes run in, or why they cannot run (a message)."""
+        if agent not in self._envs:
+            try:
+                self._envs[agent] = self._env_of(describe_agent(agent, self.limits, self.ctx.get_start_method()))
+            except AgentBuildError:
+                self._envs[agent] = self.limits
+        return self._envs[agent]
 
     def __enter__(self) -> "EpisodePool":
         return self
@@ -331,10 +361,14 @@ class EpisodePool:
             self._slots.append(_Slot(self.ctx, self.limits))
         while pending or any(s.task is not None for s in self._slots):
             for slot in self._slots:
-                if slot.task is None and pending:
+                while slot.task is None and pending:
                     task = pending.popleft()
                     attempts[task] = attempts.get(task, 0) + 1
-                    slot.run(task)
+                    env = self.agent_env(task.agent)
+                    if isinstance(env, str):
+                        yield EpisodeOutcome(blank_record(task, AGENT_ERROR, env), attempts[task], 0.0, 0.0)
+                        continue
+                    slot.run(task, env)
             busy = {s.conn: s for s in self._slots if s.task is not None}
             for conn in wait(list(busy), timeout=POLL_S):
                 slot = busy[conn]

@@ -9,8 +9,9 @@ a cluster needs the package (and the agent's module) installed.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 
+from hbmp_bench.evaluation.channel import AgentDescription
 from hbmp_bench.evaluation.env_process import blank_record
 from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits
@@ -29,8 +30,8 @@ def import_ray():
 class EpisodeActor:
     """Ray actor body: a one-slot episode pool that lives as long as the actor."""
 
-    def __init__(self, limits: RunnerLimits):
-        self.pool = EpisodePool(1, limits)
+    def __init__(self, limits: RunnerLimits, descriptions: Mapping[str, AgentDescription] | None = None):
+        self.pool = EpisodePool(1, limits, descriptions=descriptions)
 
     def run(self, task: EpisodeTask) -> EpisodeOutcome:
         (outcome,) = list(self.pool.imap([task]))
@@ -46,10 +47,13 @@ def ray_imap(
     *,
     workers: int | None = None,
     address: str | None = None,
+    descriptions: Mapping[str, AgentDescription] | None = None,
 ) -> Iterator[EpisodeOutcome]:
     """Run ``tasks`` on Ray; yields one outcome per task in finishing order.
 
     Args:
+        descriptions: agents already described (see ``EpisodePool``); each actor's pool
+            describes the others itself.
         workers: actors (default: the cluster's CPUs, at most one per task).
         address: a running cluster (``ray://host:10001``, ``auto``); None starts a local instance
             unless Ray is already initialised in this process. A local instance started here is
@@ -67,7 +71,7 @@ def ray_imap(
     actors: list = []
     try:
         n = workers or max(1, int(ray.cluster_resources().get("CPU", 1)))
-        actors.extend(actor_cls.remote(limits) for _ in range(min(n, len(pending))))
+        actors.extend(actor_cls.remote(limits, descriptions) for _ in range(min(n, len(pending))))
         attempts: dict[EpisodeTask, int] = {}
         running: dict = {}
 
@@ -85,7 +89,7 @@ def ray_imap(
                 outcome = ray.get(ref)
             except ray.exceptions.RayError as exc:
                 ray.kill(actor)
-                actor = actor_cls.remote(limits)
+                actor = actor_cls.remote(limits, descriptions)
                 actors.append(actor)
                 if attempts[task] <= limits.retries:
                     pending.appendleft(task)

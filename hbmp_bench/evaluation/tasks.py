@@ -2,14 +2,18 @@
 
 from __future__ import annotations
 
+import dataclasses
 import inspect
 import os
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from hbmp_bench.scenarios import TASKS, check_task, check_town, get_suite
+
+if TYPE_CHECKING:
+    from hbmp_bench.evaluation.channel import AgentDescription
 
 
 @dataclass(frozen=True)
@@ -200,3 +204,47 @@ def watch_lifeline(lifeline) -> None:
         os._exit(70)
 
     threading.Thread(target=wait_for_eof, name="hbmp-lifeline", daemon=True).start()
+
+
+AGENT_ENV_FACTORIES = ("hbmp_bench.envs.control_env:ControlEnv",)
+"""Envs an agent may ask for besides the behavior env (the flat baseline's control env). Only the
+evaluator (``RunnerLimits.env_factory``) may name another: an agent naming its own module would
+run its code in the env process."""
+
+
+def is_privileged(limits: RunnerLimits) -> bool:
+    """Whether envs made with ``limits`` give the agent the privileged scene fields."""
+    from hbmp_bench.agents.base import PRIVILEGED_OPTION
+
+    return dict(limits.env_kwargs).get(PRIVILEGED_OPTION) is True
+
+
+def with_agent_env(limits: RunnerLimits, agent: AgentDescription) -> RunnerLimits:
+    """``limits`` with the env the agent asks for: an agent may name an ``env_factory`` from
+    ``AGENT_ENV_FACTORIES`` (the flat baseline's control env) and ``env_kwargs`` that change what
+    its policy sees (``agents.learned.OBSERVATION_OPTIONS``: the observation kind it was trained
+    with) or ``privileged`` (``agents.base.PRIVILEGED_OPTION``: the privileged scene fields, which
+    any agent may ask for; its results are then marked privileged, see :func:`is_privileged`).
+    Anything else is refused with ValueError: an agent must not pick an easier env or run its own
+    code in the env process. Explicit limits win."""
+    from hbmp_bench.agents.base import PRIVILEGED_OPTION
+    from hbmp_bench.agents.learned import OBSERVATION_OPTIONS
+
+    if agent.env_factory is not None and agent.env_factory not in AGENT_ENV_FACTORIES:
+        raise ValueError(f"the agent asks for env_factory {agent.env_factory!r}; an agent may only ask for "
+                         f"{list(AGENT_ENV_FACTORIES)} (the evaluator can set another with RunnerLimits.env_factory)")
+    allowed = (*OBSERVATION_OPTIONS, PRIVILEGED_OPTION)
+    unknown = sorted(k for k, _ in agent.env_kwargs if k not in allowed)
+    if unknown:
+        raise ValueError(f"the agent asks for env options {unknown}; an agent may only set {list(allowed)}")
+    from hbmp_bench.envs.config import WorldConfig
+    from hbmp_bench.envs.observation import ObservationConfig
+
+    asked = dict(agent.env_kwargs)
+    if "observation" in asked or "road_profile" in asked:  # checked here: not a sim_error in every episode
+        ObservationConfig(kind=asked.get("observation", "deformed"), road=asked.get("road_profile", "paper"))
+    if PRIVILEGED_OPTION in asked:
+        WorldConfig(privileged=asked[PRIVILEGED_OPTION])
+    factory = limits.env_factory or agent.env_factory
+    kwargs = {**dict(agent.env_kwargs), **dict(limits.env_kwargs)}
+    return dataclasses.replace(limits, env_factory=factory, env_kwargs=tuple(kwargs.items()))

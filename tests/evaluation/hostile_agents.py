@@ -473,3 +473,15 @@ class SandboxProbeAgent(_Base):
             "home": os.environ.get("HOME"),
             "vm_size_kb": next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmSize")),
         })
+
+
+class OwnEnvAgent(_Base):
+    """Asks for an env of its own module: its code would run in the env process."""
+
+    env_factory = "hostile_agents:make_env"
+
+
+class EmptyRoadsAgent(_Base):
+    """Asks for an easier env: no background traffic."""
+
+    env_kwargs = {"density": "empty"}

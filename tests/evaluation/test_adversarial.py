@@ -285,3 +285,13 @@ def test_an_agent_running_as_nobody_cannot_kill_the_env_process(agent_dir):
     outcome = found(agent_dir, "EnvKillerAgent")
     assert outcome and all(value.startswith("denied") for value in outcome.values())
     assert_counted_failure(records["EnvKillerAgent"], "the env process survived")
+
+
+def test_an_agent_gets_only_an_env_it_may_ask_for_even_straight_through_the_pool(agent_dir):
+    """The pool applies what agents ask for (``with_agent_env``) by itself, so its refusals hold
+    there too: such an agent's episodes are its failures, and no env of its choosing is built."""
+    records = run(["OwnEnvAgent", "EmptyRoadsAgent", "expert"])
+    assert_counted_failure(records["OwnEnvAgent"], "asks for env_factory 'hostile_agents:make_env'")
+    assert_counted_failure(records["EmptyRoadsAgent"], "asks for env options ['density']")
+    assert records["OwnEnvAgent"].decisions == records["EmptyRoadsAgent"].decisions == 0
+    assert records["expert"].end_reason == DECISION_CAP and records["expert"].error == ""

@@ -73,7 +73,7 @@ def test_one_evaluation_at_a_time_writes_a_records_file(tmp_path):
                 pass
         with pytest.raises(EvaluationRunning):  # the evaluator takes it before it reads or writes anything
             evaluate("corl2017", "expert", towns=["Town01"], tasks=["Straight"], episodes=1, path=path,
-                     check_agent=False, progress=False)
+                     progress=False)
     assert path.read_bytes() == before and not (tmp_path / (path.name + ".tampered")).exists()
     with records_lock(path):  # released on the way out, also after the refusal
         pass

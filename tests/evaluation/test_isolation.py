@@ -89,13 +89,8 @@ def test_a_checkpoint_only_the_caller_can_read_still_loads(tmp_path):
     shutil.copy(shipped_checkpoint("hbmp"), private)
     private.chmod(0o600)
     tasks = suite_tasks("corl2017", str(private), towns=["Town01"], tasks=["Straight"], episodes=1, fidelity="event")
-    # the env the policy was trained on (hbmp's R_t is the metric profile), as evaluate() asks for it
-    from hbmp_bench.agents.learned import LearnedAgent
-    from hbmp_bench.evaluation.channel import AgentDescription
-    from hbmp_bench.evaluation.evaluate import with_agent_env
-
-    limits = with_agent_env(RunnerLimits(max_decisions=3), AgentDescription.of(LearnedAgent(str(private))))
-    with EpisodePool(1, limits) as pool:
+    # the pool itself gives the policy the env it was trained on (hbmp's R_t is the metric profile)
+    with EpisodePool(1, RunnerLimits(max_decisions=3)) as pool:
         (outcome,) = list(pool.imap(tasks))
     assert outcome.record.end_reason == "decision_cap" and outcome.record.error == ""
     assert outcome.record.decisions == 3

@@ -79,5 +79,5 @@ def test_resuming_on_another_net_under_the_same_name_is_refused(tmp_path):
         check_provenance(records, "expert", "", ["mine"])
     with pytest.raises(UserError, match="map 'mine'"):
         evaluate("corl2017", "expert", towns=["mine"], tasks=["Straight"], episodes=1,
-                 out_dir=tmp_path / "runs", check_agent=False, progress=False)
+                 out_dir=tmp_path / "runs", progress=False)
     assert records.read_text() == '{"episode": 0}\n'

@@ -31,7 +31,7 @@ def test_a_hung_or_crashed_simulation_is_retried_once(factory, tmp_path, monkeyp
 def test_an_env_that_always_fails_gives_a_sim_error_record_and_resume_reruns_it(tmp_path):
     limits = RunnerLimits(env_factory="faulty_envs:always_raise")
     result = evaluate("corl2017", "expert", towns=["Town01"], tasks=["Straight"], episodes=2, workers=1,
-                      fidelity="event", out_dir=tmp_path, limits=limits, progress=False, check_agent=False)
+                      fidelity="event", out_dir=tmp_path, limits=limits, progress=False)
     assert [r.end_reason for r in result.records] == [SIM_ERROR, SIM_ERROR]
     assert all("RuntimeError: SUMO lost the plot" in r.error for r in result.records)
     assert not any(r.success for r in result.records)

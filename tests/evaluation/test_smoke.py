@@ -15,9 +15,11 @@ pytestmark = pytest.mark.slow
 FAST = dict(fidelity="event")  # the checks do not depend on the fidelity; event keeps them quick
 
 
-@pytest.mark.parametrize("agent", ["expert", "random", "keep"])
+@pytest.mark.parametrize("agent", ["expert", "random", "keep", "hbmp", "flat"])
 def test_the_package_agents_pass_the_smoke_run(hbmp_smoke, agent):
-    result = hbmp_smoke(agent, **FAST)
+    """Each in the env it asks for: the expert's privileged fields, hbmp's metric R_t, flat's control env
+    (which always runs the bicycle model: continuous fidelity)."""
+    result = hbmp_smoke(agent, **(FAST if agent != "flat" else {"fidelity": "continuous"}))
     assert [o.record.task for o in result.outcomes] == list(TASKS)
     assert result.decisions == len(TASKS) * SmokeConfig().max_decisions
     assert 0.0 < result.max_decision_s < SmokeConfig().max_decision_s
