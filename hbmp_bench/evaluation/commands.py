@@ -86,9 +86,15 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from hbmp_bench.metrics.report import VIEW_LEGENDS, build_report, readable, view_rows, write_report
+    from hbmp_bench.metrics.report import VIEW_LEGENDS, build_report, load_results, readable, view_rows, write_report
+    from hbmp_bench.scenarios import check_task
 
-    rep = build_report(args.paths)
+    results = load_results(args.paths)
+    if args.tasks:
+        results = results[results["task"].isin([check_task(t) for t in args.tasks])]
+        if results.empty:
+            raise UserError(f"the results hold no episode of the tasks {args.tasks}")
+    rep = build_report(results)
     first = Path(args.paths[0])
     out = Path(args.out) if args.out else (first if first.is_dir() else first.parent) / "report"
     written = write_report(rep, out)
@@ -170,7 +176,10 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_cmd_agreement)
 
     p = sub.add_parser("report", help="tables (CSV, markdown) and a failure bar chart from records")
-    p.add_argument("paths", nargs="+", metavar="DIR", help="records folders or .jsonl files (one result set each)")
+    p.add_argument("paths", nargs="+", metavar="DIR", help="records (.jsonl) or leaderboard results (.json) "
+                   "files, or folders of them (e.g. leaderboards/hbmp: every entry of that board)")
+    p.add_argument("--tasks", nargs="+", default=None, metavar="TASK",
+                   help="only these tasks (e.g. NavigationDynamic: the paper's figure of outcomes per town)")
     p.add_argument("--out", default=None, help="output folder (default: <first DIR>/report)")
     p.add_argument("--json", action="store_true", help="print every view as JSON rows (inf as null)")
     p.set_defaults(func=_cmd_report)

@@ -171,6 +171,15 @@ def check_results(doc: dict, source: str = "results") -> dict:
     return doc
 
 
+def results_records(path: str | os.PathLike) -> list[EpisodeRecord]:
+    """The episode records of a results file (checked, see :func:`check_results`), as the
+    evaluation wrote them: so ``hbmp-bench report`` reads leaderboard entries like records files."""
+    doc = check_results(json.loads(Path(path).read_text(encoding="utf-8")), str(path))
+    shared = {"suite": doc["suite"], "agent": doc["agent"], "fidelity": doc["fidelity"],
+              "package_version": doc.get("provenance", {}).get("package_version", "")}
+    return [EpisodeRecord(**{**episode, **shared}) for episode in doc["episodes"]]
+
+
 def write_json(path: Path, doc: dict) -> Path:
     """Write a results document to ``path`` (one line per episode, so diffs stay readable) through a
     temporary file and a rename."""

@@ -1,8 +1,8 @@
 """Evaluation reports as pandas DataFrames, for notebooks and for ``hbmp-bench report``.
 
-Input is one or more *result sets*: JSON-lines records files (or folders of them). Each set is
-labelled by its agent (plus the fidelity when sets differ in it, plus the folder when two sets
-would share a label). Per episode key the last record wins. Episodes recorded as ``sim_error``
+Input is one or more *result sets*: JSON-lines records files, leaderboard results files (or
+folders of either). Each set is labelled by its agent (plus the fidelity when sets differ in it,
+plus the folder when two sets would share a label). Per episode key the last record wins. Episodes recorded as ``sim_error``
 (the simulator failed, not the agent) or ``decision_cap`` (smoke runs) are not scored; the sim
 errors are shown as a ``sim_errors`` count in ``failures``, ``driving`` and ``coverage`` and at
 the top of ``report.md``. ``agent_error`` episodes are the agent's failures and count everywhere.
@@ -74,18 +74,20 @@ VIEW_LEGENDS: dict[str, str] = {
 
 
 def records_files(paths: Iterable[str | os.PathLike]) -> list[Path]:
-    """The ``.jsonl`` files named by ``paths`` (files, or folders searched non-recursively); a named file
+    """The result files named by ``paths``: JSON-lines records files (``.jsonl``) and leaderboard
+    results files (``.json``), or folders of either (searched non-recursively: the ``.jsonl``
+    files, else the ``.json`` ones, so ``leaderboards/<suite>`` reads a whole board). A named file
     of another kind raises ValueError."""
     files: list[Path] = []
     for p in map(Path, paths):
         if p.is_dir():
-            found = sorted(p.glob("*.jsonl"))
+            found = sorted(p.glob("*.jsonl")) or sorted(p.glob("*.json"))
             if not found:
-                raise FileNotFoundError(f"no .jsonl records in {p}")
+                raise FileNotFoundError(f"no .jsonl records or .json results files in {p}")
             files.extend(found)
         elif p.is_file():
-            if p.suffix != ".jsonl":
-                raise ValueError(f"{p} is not a records file (.jsonl)")
+            if p.suffix not in (".jsonl", ".json"):
+                raise ValueError(f"{p} is not a records file (.jsonl) or a leaderboard results file (.json)")
             files.append(p)
         else:
             raise FileNotFoundError(f"no records file or folder {p}")
@@ -95,11 +97,17 @@ def records_files(paths: Iterable[str | os.PathLike]) -> list[Path]:
 def load_results(paths: Iterable[str | os.PathLike]) -> pd.DataFrame:
     """One row per episode of every result set, with a ``result_set`` label column.
 
-    A file holding several agents or fidelities gives one set for each.
+    A file holding several agents or fidelities gives one set for each; a leaderboard results
+    file is one set (``evaluation.leaderboard.results_records``).
     """
     frames = []
     for path in records_files(paths):
-        records = latest_per_key(read_records(path))
+        if path.suffix == ".json":
+            from hbmp_bench.evaluation.leaderboard import results_records
+
+            records = results_records(path)
+        else:
+            records = latest_per_key(read_records(path))
         if not records:
             continue
         df = pd.DataFrame([r.to_dict() for r in records])

@@ -130,3 +130,20 @@ def test_each_fidelity_has_its_own_entry(tmp_path):
     event = entry_path(tmp_path, "corl2017", "expert", subset=False, fidelity="event")
     continuous = entry_path(tmp_path, "corl2017", "expert", subset=False, fidelity="continuous")
     assert event != continuous and event.name == "expert.event.json"
+
+
+def test_report_reads_a_board_as_it_reads_the_records_behind_it(board, tmp_path, capsys):
+    """``hbmp-bench report leaderboards/<suite>`` gives the tables of the submitted records, so the
+    README's tables come from the committed entries by one command."""
+    from hbmp_bench.metrics.report import build_report, load_results
+
+    from_board = build_report(load_results([board / tiny_suite.NAME]))
+    from_records = build_report(load_results([runs_dir(board, tiny_suite.NAME)]))
+    for view in ("success", "failures", "driving"):
+        assert from_board[view].equals(from_records[view]), view
+    assert set(from_board["success"].columns.get_level_values("agent")) == {"expert", "keep"}
+    assert main(["report", str(board / tiny_suite.NAME), "--tasks", "Straight", "--out", str(tmp_path / "r")]) == 0
+    assert (tmp_path / "r" / "failures.png").exists() and "expert" in capsys.readouterr().out
+    assert main(["report", str(board / tiny_suite.NAME), "--tasks", "Nav", "--out", str(tmp_path / "r2")]) != 0
+    assert "unknown task 'Nav'; valid: Navigation, NavigationDynamic, OneTurn, Straight" in capsys.readouterr().err
+    assert not (tmp_path / "r2").exists()

@@ -184,5 +184,5 @@ def test_a_file_that_is_not_records_is_named_in_a_clear_error(tmp_path):
     path.write_text(json.dumps({"code": "abc", "episodes": [1, 2, 3]}, indent=2) + "\n")
     with pytest.raises(ValueError, match="provenance.json: line 6 is not an episode record"):
         read_records(path)
-    with pytest.raises(ValueError, match="provenance.json is not a records file"):
+    with pytest.raises(ValueError, match="provenance.json is not a leaderboard results file"):
         load_results([path])
