@@ -63,8 +63,6 @@ class EpisodeRun:
         reset_s: wall time of the env's reset [s].
         act_s / step_s: wall time of each ``agent.act`` / ``env.step`` call [s].
         stepping_s: their sum over ``env.step`` [s].
-        stepping_cpu_s: the process's CPU time in ``env.step`` [s] (a benchmark's steadier clock
-            when the machine is shared).
     """
 
     ended: bool = False
@@ -74,7 +72,6 @@ class EpisodeRun:
     act_s: list[float] = field(default_factory=list)
     step_s: list[float] = field(default_factory=list)
     stepping_s: float = 0.0
-    stepping_cpu_s: float = 0.0
 
     def record(self, env) -> dict:
         """The episode record: the final one when the episode ended, else the env's record so far."""
@@ -116,13 +113,12 @@ def run_episode(env, agent, *, seed: int | None = None, options: dict | None = N
         except Exception as exc:
             raise AgentFailed(str(exc), run.decisions) from exc
         run.act_s.append(time.perf_counter() - start)
-        start, cpu_start = time.perf_counter(), time.process_time()
+        start = time.perf_counter()
         try:
             obs, reward, terminated, truncated, info = env.step(action)
         except Exception as exc:
             raise EnvFailed(str(exc), "step", run.decisions) from exc
         run.step_s.append(time.perf_counter() - start)
-        run.stepping_cpu_s += time.process_time() - cpu_start
         run.stepping_s += run.step_s[-1]
         run.decisions += 1
         run.info = info
