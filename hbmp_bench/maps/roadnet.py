@@ -759,10 +759,9 @@ def _close_stretch(shape: np.ndarray, other: np.ndarray, spacing: float = 0.5,
 
 def _sample_polyline(shape: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Arc lengths (M,) [m] and points (M, 2) every ``spacing`` [m] along a polyline, ends included."""
-    seg = np.hypot(*np.diff(shape, axis=0).T)
-    total = float(seg.sum())
-    s = np.append(np.arange(0.0, total, spacing), total)
-    return s, np.array([point_along(shape, x) for x in s])
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(shape, axis=0).T))])
+    s = np.append(np.arange(0.0, cum[-1], spacing), cum[-1])
+    return s, np.column_stack([np.interp(s, cum, shape[:, 0]), np.interp(s, cum, shape[:, 1])])
 
 
 def _project_points(shape: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

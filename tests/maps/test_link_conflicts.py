@@ -59,3 +59,18 @@ def test_conflicting_links_come_close():
                 foe = net.link_shape(c.foe)
                 gap = np.min(np.hypot(*(shape[:, None, :] - foe[None, :, :]).transpose(2, 0, 1)))
                 assert gap < CONFLICT_WIDTH_M + 5.0  # vertices are a few metres apart at most
+
+
+def test_polyline_samples_are_the_points_at_their_arc_lengths():
+    """The conflict and crossing zones sample link shapes in one vectorised pass: the same points as
+    ``point_along`` at each arc length, zero-length segments (duplicated shape points) included."""
+    from hbmp_bench.maps.roadnet import _sample_polyline, point_along
+
+    rng = np.random.default_rng(0)
+    for k in range(300):
+        shape = np.cumsum(rng.normal(size=(int(rng.integers(2, 8)), 2)) * rng.uniform(0.1, 5.0), axis=0)
+        if k % 3 == 0:
+            shape = np.insert(shape, 1, shape[1], axis=0)
+        s, points = _sample_polyline(shape, 0.5)
+        assert s[0] == 0.0 and np.all(np.diff(s) > 0) and np.diff(s)[:-1] == pytest.approx(0.5)
+        np.testing.assert_allclose(points, [point_along(shape, x) for x in s], atol=1e-9)
