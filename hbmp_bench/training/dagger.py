@@ -43,6 +43,7 @@ import torch
 import torch.nn.functional as F
 from tensordict import TensorDict
 
+from hbmp_bench.errors import UserError
 from hbmp_bench.training.checkpoints import load_checkpoint, policy_only, save_checkpoint
 from hbmp_bench.training.models import behavior_model_cfgs, build_model, observation_shapes
 from hbmp_bench.training.ppo import MASK_GROUP, input_groups, model_info
@@ -212,6 +213,11 @@ def train_dagger(run: RunConfig, env_config: WorkerEnvConfig, dagger: DaggerConf
     progress = Progress.from_dict(resume["progress"]) if resume else Progress()
     if progress.episodes >= run.episodes:
         raise ValueError(f"the checkpoint already has {progress.episodes} episodes; ask for more than that")
+    data_path = os.path.join(os.path.dirname(os.path.abspath(run.resume)), "dataset.npz") if resume else ""
+    if resume and not os.path.isfile(data_path):
+        raise UserError(f"DAgger goes on from its aggregated demonstrations, but {data_path} is missing beside the "
+                        f"checkpoint (keep or commit dataset.npz with checkpoint.pt); without them the run would "
+                        f"train on a new dataset only: start a new run instead")
     os.makedirs(run.out, exist_ok=True)
     torch.manual_seed(run.seed)
     torch.set_num_threads(run.threads())
@@ -235,11 +241,9 @@ def train_dagger(run: RunConfig, env_config: WorkerEnvConfig, dagger: DaggerConf
             actor.load_state_dict(resume["actor_state_dict"])
             optimizer.load_state_dict(resume["optimizer_state_dict"])
             rounds = int(resume["progress"].get("iterations", 0))
-            data_path = os.path.join(os.path.dirname(os.path.abspath(run.resume)), "dataset.npz")
-            if os.path.isfile(data_path):
-                with np.load(data_path) as arrays:
-                    train_set.load_state_dict(arrays, "train")
-                    holdout.load_state_dict(arrays, "holdout")
+            with np.load(data_path) as arrays:
+                train_set.load_state_dict(arrays, "train")
+                holdout.load_state_dict(arrays, "holdout")
         options = {"kind": "il", "workers": run.workers, "backend": run.backend,
                    **{f"env.{k}": v for k, v in info["env"].items()},
                    **{f"dagger.{k}": v for k, v in dataclasses.asdict(dagger).items()}}

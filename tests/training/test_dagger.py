@@ -1,10 +1,13 @@
 """DAgger: the β schedule, the bit-packed dataset, and a short real run where agreement with the
 expert rises on held-out episodes; resuming continues the same run."""
 
+import shutil
+
 import numpy as np
 import pytest
 import torch
 
+from hbmp_bench.errors import UserError
 from hbmp_bench.training.checkpoints import build_actor, load_checkpoint
 from hbmp_bench.training.dagger import DaggerConfig, DemoDataset, agreement, expert_probability, train_dagger
 from hbmp_bench.training.models import behavior_model_cfgs, build_model
@@ -89,6 +92,13 @@ def test_dagger_learns_the_expert_on_held_out_episodes_and_resumes(tmp_path):
     eps = read_csv(f"{out}/episodes.csv")
     assert eps["episode"].tolist() == list(range(1, 11)) and eps["beta"][0] == pytest.approx(0.95)
     assert eps["beta"][-1] < 0.5, "β decays over the budget"
+    copy = tmp_path / "without_dataset"
+    copy.mkdir()
+    shutil.copy(f"{out}/checkpoint.pt", copy)
+    with pytest.raises(UserError, match="dataset.npz is missing beside the checkpoint"):
+        train_dagger(RunConfig("il", episodes=11, out=str(copy), workers=1, seed=1, progress=False,
+                               resume=str(copy / "checkpoint.pt")), env, cfg)
+    assert sorted(p.name for p in copy.iterdir()) == ["checkpoint.pt"], "refused before anything was written"
     resumed = train_dagger(RunConfig("il", episodes=11, out=out, workers=1, seed=1, progress=False,
                                      resume=f"{out}/checkpoint.pt"), env, cfg)
     assert resumed["progress"]["episodes"] == 11
