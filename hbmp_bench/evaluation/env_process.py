@@ -2,7 +2,7 @@
 
 Protocol with the pool (tuples on one duplex pipe; the pool is trusted):
     pool → env  ``("run", (EpisodeTask, env factory, env options))`` followed by the descriptor of a
-                fresh agent channel                (``multiprocessing.reduction.send_handle``), or ``("stop", None)``;
+                fresh agent channel (``multiprocessing.reduction.send_handle``), or ``("stop", None)``;
     env → pool  ``("beat", None)`` once started, then while an episode makes progress or waits
                 for the agent (about every 0.5 s), then ``("done", outcome dict)``.
 

@@ -30,12 +30,13 @@ from hbmp_bench.errors import Interrupted, UnknownNameError, UserError
 from hbmp_bench.evaluation.channel import AgentDescription
 from hbmp_bench.evaluation.integrity import RecordsLedger, records_lock
 from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool, describe_agent
-from hbmp_bench.evaluation.tasks import (AGENT_ENV_FACTORIES, EpisodeTask, RunnerLimits, agent_slug, is_privileged,  # noqa: F401
-                                         suite_tasks, with_agent_env)
+from hbmp_bench.evaluation.tasks import (EpisodeTask, RunnerLimits, agent_slug, is_privileged, suite_tasks,
+                                         with_agent_env)
 from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, EpisodeRecord, latest_per_key, repair_records
 
 BACKENDS = ("process", "ray")
 """``process``: an ``EpisodePool`` on this machine; ``ray``: Ray actors (local or a cluster)."""
+
 
 @dataclass(frozen=True)
 class EvaluationResult:

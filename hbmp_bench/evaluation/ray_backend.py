@@ -52,12 +52,12 @@ def ray_imap(
     """Run ``tasks`` on Ray; yields one outcome per task in finishing order.
 
     Args:
-        descriptions: agents already described (see ``EpisodePool``); each actor's pool
-            describes the others itself.
         workers: actors (default: the cluster's CPUs, at most one per task).
         address: a running cluster (``ray://host:10001``, ``auto``); None starts a local instance
             unless Ray is already initialised in this process. A local instance started here is
             shut down at the end.
+        descriptions: agents already described (see ``EpisodePool``); each actor's pool
+            describes the others itself.
     """
     ray = import_ray()
     limits = limits or RunnerLimits()
