@@ -48,7 +48,8 @@ class BehaviorEnv(gym.Env):
     ## Episode end
     Terminated at the goal (ego centre within the suite's radius, 2 m), when the ego leaves the
     network, and, when the suite says so, at a collision (NoCrash) or any violation (the paper's
-    protocol). Truncated at the suite's timeout (route length at 10 km/h + 10 s for CoRL2017).
+    protocol). Truncated at the suite's timeout (CoRL2017: route length at 10 km/h + 10 s and a full red at
+    every light on the route).
     ``info["episode"]`` then holds the episode record.
 
     ## Arguments
