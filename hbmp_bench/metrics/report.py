@@ -22,6 +22,10 @@ Views (``build_report``):
                    reached the goal (median, min, max): about 1 when route lengths are what a
                    car drives, since the goal is reached within a couple of metres.
     coverage       per set: episodes in the views, sim errors left out, agent errors.
+    paired         per pair of sets, on the episodes both scored (same suite, town, task and index):
+                   both succeeded, only the first, only the second, neither, the success difference
+                   and the exact two-sided McNemar p on the episodes where they differ; whether a gap
+                   between two agents is more than the luck of these episodes (not of training seeds).
 """
 
 from __future__ import annotations
@@ -69,6 +73,10 @@ VIEW_LEGENDS: dict[str, str] = {
                     "lengths are what a car drives).",
     "coverage": "Episodes scored per result set; simulator errors and decision-capped smoke episodes are left "
                 "out of every table; agent errors count as failed episodes.",
+    "paired": "Two result sets on the episodes both scored: only_first / only_second = episodes only that one "
+              "reached the goal; diff_pp = success % first - second; p_mcnemar = exact two-sided McNemar test on "
+              "those discordant episodes (small: the gap is more than the luck of these episodes; it says "
+              "nothing of training seeds).",
 }
 """One-line meaning and units of each view of :func:`build_report`, printed above it."""
 
@@ -279,6 +287,45 @@ def coverage(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows).set_index("result_set")
 
 
+EPISODE_KEY = ("suite", "town", "task", "episode")
+"""The columns that name one episode of a suite (the same episode in every result set)."""
+
+
+def mcnemar_p(only_first: int, only_second: int) -> float:
+    """Exact two-sided McNemar p-value of ``only_first`` against ``only_second`` discordant pairs: the
+    binomial probability, at one half, of a split at least this uneven (1.0 without discordant pairs)."""
+    n = only_first + only_second
+    if n == 0:
+        return 1.0
+    tail = sum(math.comb(n, k) for k in range(min(only_first, only_second) + 1)) / 2.0 ** n
+    return min(1.0, 2.0 * tail)
+
+
+def paired_comparison(df: pd.DataFrame) -> pd.DataFrame:
+    """Per pair of result sets (in their order), on the episodes both scored: ``episodes``,
+    ``both_success``, ``only_first``, ``only_second``, ``neither``, ``diff_pp`` (success % of the
+    first minus the second's over those episodes, one decimal) and ``p_mcnemar`` (:func:`mcnemar_p`, three
+    significant digits).
+    Empty with fewer than two sets or none sharing an episode."""
+    df = scored(df)
+    success = {s: part.set_index(list(EPISODE_KEY))["success"].astype(bool) for s, part in df.groupby("result_set")}
+    sets = _sets(df)
+    rows = []
+    for i, first in enumerate(sets):
+        for second in sets[i + 1:]:
+            a, b = success[first].align(success[second], join="inner")
+            if a.empty:
+                continue
+            only_first, only_second = int((a & ~b).sum()), int((~a & b).sum())
+            rows.append({"first": first, "second": second, "episodes": len(a), "both_success": int((a & b).sum()),
+                         "only_first": only_first, "only_second": only_second, "neither": int((~a & ~b).sum()),
+                         "diff_pp": round(100.0 * (only_first - only_second) / len(a), 1),
+                         "p_mcnemar": float(f"{mcnemar_p(only_first, only_second):.3g}")})
+    if not rows:
+        return pd.DataFrame()
+    return pd.DataFrame(rows).set_index(["first", "second"])
+
+
 @dataclass(frozen=True)
 class Report:
     """Every view of a set of results (see the module docstring); ``views`` maps name → DataFrame."""
@@ -299,6 +346,7 @@ def build_report(source: pd.DataFrame | Sequence[str | os.PathLike]) -> Report:
         "km_between": km_between_infractions(df),
         "route_length": route_length_check(df),
         "coverage": coverage(df),
+        "paired": paired_comparison(df),
     })
 
 

@@ -186,3 +186,30 @@ def test_a_file_that_is_not_records_is_named_in_a_clear_error(tmp_path):
         read_records(path)
     with pytest.raises(ValueError, match="provenance.json is not a leaderboard results file"):
         load_results([path])
+
+
+def test_mcnemar_p_is_the_exact_two_sided_binomial_tail():
+    from hbmp_bench.metrics.report import mcnemar_p
+
+    assert mcnemar_p(8, 1) == pytest.approx(2 * (1 + 9) / 2 ** 9)  # 0.039
+    assert mcnemar_p(1, 8) == mcnemar_p(8, 1)
+    assert mcnemar_p(10, 0) == pytest.approx(2 / 2 ** 10)
+    assert mcnemar_p(5, 5) == 1.0 and mcnemar_p(1, 0) == 1.0 and mcnemar_p(0, 0) == 1.0
+
+
+def test_paired_view_counts_the_episodes_both_sets_scored_and_tests_where_they_differ(two_sets):
+    from hbmp_bench.metrics.report import paired_comparison
+
+    first = [rec(agent="first", episode=i) for i in range(10)]
+    second = [rec(agent="second", episode=i) if i < 2 else failed(agent="second", episode=i) for i in range(10)]
+    extra = [rec(agent="second", town="Town02", episode=0),  # only the second has it: not paired
+             rec(agent="first", town="Town03", episode=0),
+             rec(agent="second", town="Town03", episode=0, success=False, end_reason="sim_error")]  # not scored
+    view = paired_comparison(records_frame(first + second + extra))
+    row = view.loc[("first", "second")].to_dict()
+    assert row == {"episodes": 10, "both_success": 2, "only_first": 8, "only_second": 0, "neither": 0,
+                   "diff_pp": 80.0, "p_mcnemar": 0.00781}
+    # the fixture's sets share three scored episodes (Town01 Straight 0 and 1, Town02 Straight 0)
+    shared = build_report(two_sets)["paired"].loc[("a", "b")].to_dict()
+    assert (shared["episodes"], shared["both_success"], shared["neither"], shared["p_mcnemar"]) == (3, 2, 1, 1.0)
+    assert paired_comparison(records_frame(first)).empty  # one set: nothing to pair
