@@ -320,10 +320,9 @@ def sample_episode(
     (``RoadNetwork.route_drivable``: a start lane that no lane change can leave before the junction
     where the route turns off it, as on the short edges of real towns' road splits), and so are routes
     whose timeout a lawful driver cannot meet (:func:`lawful_route_time`: at the speed limits, with one
-    full red at the route's slowest light; the timeout is the suite's, :func:`episode_timeout`: a rule
-    made for drivers that stop at lights leaves a 60 m route less time than one red of CARLA's Town10HD);
-    the band widens
-    step by step if a small map has none. (``route_drivable`` redraws 1-4 Town03 episodes per suite of the
+    full red at the route's slowest light, against the suite's :func:`episode_timeout`: CoRL2017's 10 km/h
+    + 10 s without its light waits left a 60 m route 32 s, less than one red of CARLA's Town10HD); the band
+    widens step by step if a small map has none. (``route_drivable`` redraws 1-4 Town03 episodes per suite of the
     built-in towns, episode rules 9 and 10; CARLA's Town10HD imported: 43 of 335 before them.)
     """
     net = road_network(town)
