@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["project_poses", "obstacle_cost", "collisions"]
+__all__ = ["project_poses", "obstacle_cost", "collisions", "followers"]
 
 
 @njit(cache=True, nogil=True)
@@ -125,6 +125,24 @@ def obstacle_cost(SS, EE, so0, eo0, tho, ov, olength, owidth, times, length, wid
                      + kappa_obs * max(abs(EE[t, j] - eo) - half_w, 0.0))
                 acc[j] += math.exp(g * neg_inv_sigma)
     return acc / T
+
+
+@njit(cache=True, nogil=True)
+def followers(so, eo, theta, olength, owidth, s0, e0, length, width):
+    """(K,) True for the obstacles that follow the ego: wholly behind it along the path, in its line (their
+    footprints overlap sideways) and heading the path's way (within 45 degrees).
+
+    Args:
+        so, eo, theta: (K,) obstacles' arc length, lateral offset [m] and heading to the path [rad] (as
+            :func:`project_poses`); olength, owidth: (K,) their footprints [m].
+        s0, e0: the ego's arc length and offset on the same path [m]; length, width: its footprint [m].
+    """
+    K = len(so)
+    out = np.empty(K, np.bool_)
+    for k in range(K):
+        out[k] = (so[k] + 0.5 * olength[k] < s0 - 0.5 * length and abs(eo[k] - e0) < 0.5 * (width + owidth[k])
+                  and abs(theta[k]) < 0.25 * math.pi)
+    return out
 
 
 @njit(cache=True, nogil=True)

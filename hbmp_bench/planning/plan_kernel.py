@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .obstacle_kernels import collisions, obstacle_cost, project_poses
+from .obstacle_kernels import collisions, followers, obstacle_cost, project_poses
 from .rollout import roll_out
 from .tracking_kernel import bisect_right
 
@@ -182,18 +182,19 @@ def plan_samples(x, y, yaw, v, s_hint, v_ref, speed_limit,
             start, unit tangent, chord, heading and curvature change (N - 1,) [m, rad, 1/m].
         ox ... owidth: (K,) obstacles (:class:`.state.Obstacles` fields).
         times, dv, dw, dec: the config's layout (:func:`.planner._layout`).
-        p: (23,) the config's scalars (:func:`.planner.kernel_params`).
+        p: (24,) the config's scalars (:func:`.planner.kernel_params`).
 
     Returns:
         ``(trajectories (S, T, 4), omega (S, T - 1), frenet (S, T, 2), V (S, T), c_obs (S,),
         hit (S,), dev (S,), v_ref)`` as :class:`.planner.PlanResult` names them; ``hit``: the
-        sample meets an obstacle; ``dev``: its tie-breaking distance from the nominal sample;
+        sample meets an obstacle (a follower of the ego's left out, ``PlannerConfig.ignore_followers``); ``dev``: its tie-breaking distance from the nominal sample;
         ``v_ref``: capped for curves.
     """
     (dt, n_v, n_omega, hold, horizon, accel, decel, yaw_rate_max, max_curvature, lat_accel_max, k_theta, k_e,
      gain_speed, kappa_obs, sigma_obs, length, width, safety_margin, ds, curve_lat_accel, dev_w, dev_v,
-     cutoff) = (p[0], int(p[1]), int(p[2]), int(p[3]), p[4], p[5], p[6], p[7], p[8], p[9], p[10], p[11], p[12],
-                p[13], p[14], p[15], p[16], p[17], p[18], p[19], p[20], p[21], p[22])
+     cutoff, ignore_followers) = (p[0], int(p[1]), int(p[2]), int(p[3]), p[4], p[5], p[6], p[7], p[8], p[9], p[10],
+                                  p[11], p[12], p[13], p[14], p[15], p[16], p[17], p[18], p[19], p[20], p[21], p[22],
+                                  p[23] != 0.0)
     T = len(times)
     n = T - 1
     lat_finite = math.isfinite(lat_accel_max)
@@ -318,7 +319,11 @@ def plan_samples(x, y, yaw, v, s_hint, v_ref, speed_limit,
     so0, eo0, tho = project_poses(ox, oy, oyaw, u_x0, u_y0, u_tx, u_ty, u_chord, u_s, u_h, u_dh)
     c_obs = obstacle_cost(SS[1:].copy(), EE[1:].copy(), so0, eo0, tho, ov, olength, owidth, future, length,
                           width, kappa_obs, sigma_obs, cutoff)
-    hit = collisions(X[1:].copy(), Y[1:].copy(), PSI[1:].copy(), ox, oy, oyaw, ov, olength, owidth, future,
+    checked = np.ones(len(ox), np.bool_)
+    if ignore_followers:
+        checked = ~followers(so0, eo0, tho, olength, owidth, s0, e0, length, width)
+    hit = collisions(X[1:].copy(), Y[1:].copy(), PSI[1:].copy(), ox[checked], oy[checked], oyaw[checked],
+                     ov[checked], olength[checked], owidth[checked], future,
                      0.5 * length + safety_margin, 0.5 * width + safety_margin)
 
     traj = np.empty((S, T, 4))

@@ -5,6 +5,8 @@ trajectory on planning problems recorded from expert episodes in Town01, Town03 
 from pathlib import Path as FsPath
 
 import numpy as np
+import pytest
+
 from hbmp_bench.planning import Obstacles, Path, PlannerConfig, PlanningProblem, VehicleState, plan, round_corners
 from hbmp_bench.planning import obstacle_kernels, planner
 
@@ -93,15 +95,17 @@ def test_compiled_kernels_equal_their_python_source():
                                obstacle_kernels.obstacle_cost.py_func(*cost_args), rtol=1e-12, atol=0)
 
 
-def test_same_chosen_trajectory_as_the_reference_on_recorded_problems(monkeypatch):
+@pytest.mark.parametrize("ignore_followers, decided", [(False, 20), (True, 5)])
+def test_same_chosen_trajectory_as_the_reference_on_recorded_problems(monkeypatch, ignore_followers, decided):
     problems = recorded_problems()
     assert len(problems) >= 50
-    cfg = PlannerConfig()
+    cfg = PlannerConfig(ignore_followers=ignore_followers)
     compiled = [plan(p, cfg) for p in problems]
     monkeypatch.setattr(planner, "_obstacle_cost", planner.obstacle_cost_reference)
     monkeypatch.setattr(planner, "_collisions", planner.collisions_reference)
     reference = [planner.plan_reference(p, cfg) for p in problems]
-    assert sum(not r.feasible.all() for r in reference) >= 20  # the collision check decides some
+    # the collision check decides some: 34 of the 79 problems with every obstacle checked, 7 without the followers
+    assert sum(not r.feasible.all() for r in reference) >= decided
     for a, b in zip(compiled, reference):
         np.testing.assert_array_equal(a.feasible, b.feasible)
         np.testing.assert_allclose(a.costs, b.costs, rtol=C_OBS_RTOL, atol=C_OBS_ATOL)

@@ -15,6 +15,7 @@ CONFIGS = {
     "paper gains, no limits": PlannerConfig(gain_speed=np.inf, lat_accel_max=np.inf, curve_lat_accel=np.inf),
     "one sample, brake fallback": PlannerConfig(n_v=1, n_omega=1, horizon=2.0, infeasible_fallback="brake"),
     "fine path, long horizon": PlannerConfig(path_resolution=0.5, horizon=5.0, n_v=5, n_omega=11),
+    "followers checked": PlannerConfig(ignore_followers=False),
 }
 
 

@@ -197,6 +197,35 @@ def test_blocked_lane_slows_down():
     assert v[-1] <= 1.0 + 1e-9 and np.all(np.diff(v) <= 1e-12)  # 10 m/s at >= 3 m/s^2 for 3 s
 
 
+def test_a_close_follower_does_not_keep_the_ego_from_braking_for_a_queue():
+    """Recorded in nocrash-dense (Town04 episode 2, 119 s): a stopped car 25 m ahead, a car 15 m behind at
+    9.6 m/s. Predicted at constant speed the follower hit every slowing sample, nothing was feasible, and the
+    cheapest sample kept 13 m/s into the queue (``hbmp`` ran into it at 10 m/s three seconds later)."""
+    obs = [car(25.0), car(-15.0, y=-0.3, v=9.6)]
+    r = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 10.5), v_ref=13.0, obs=obs))
+    assert r.collision_free and r.chosen in (r.brake_index - 1, r.brake_index) and r.trajectory[-1, 3] < 2.0
+    alone = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 10.5), v_ref=13.0, obs=obs[:1]))
+    assert (r.costs[:, 2] > alone.costs[:, 2]).all()  # the follower still counts in c_obs
+    old = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 10.5), v_ref=13.0, obs=obs), PlannerConfig(ignore_followers=False))
+    assert not old.collision_free and old.trajectory[-1, 3] > 10.5  # the defect this setting removes
+
+
+def test_only_a_follower_in_the_egos_line_is_left_out_of_the_collision_check():
+    from hbmp_bench.planning.obstacle_kernels import followers
+
+    # (s, e, theta) of: behind in line, behind in the next lane, alongside, behind oncoming, ahead, just touching
+    so = np.array([-15.0, -15.0, -2.0, -15.0, 15.0, -4.5])
+    eo = np.array([0.3, 3.5, 0.0, 0.0, 0.0, 0.0])
+    theta = np.array([0.1, 0.0, 0.0, np.pi, 0.0, 0.0])
+    size = np.full(6, 4.6), np.full(6, 1.9)
+    assert followers(so, eo, theta, *size, 0.0, 0.0, 4.6, 1.9).tolist() == [True, False, False, False, False, False]
+    # a lane change under way: the ego 3.5 m off the (target lane's) path, a car behind in the target lane
+    assert not followers(so[:1], np.zeros(1), theta[:1], *(a[:1] for a in size), 0.0, -3.5, 4.6, 1.9)[0]
+    # that car stays in the check: cutting in front of it at 10 m/s when it closes at 15 is infeasible
+    r = plan(problem(path=LEFT, obs=[car(-8.0, y=LANE, v=15.0)]))
+    assert not r.feasible[: r.brake_index - 1].all()
+
+
 def test_unavoidable_obstacle_is_flagged():
     p = problem(obs=[car(8.0)])  # 3 m gap at 10 m/s: even the full brake hits it
     r = plan(p)
