@@ -5,7 +5,8 @@ folders of either). Each set is labelled by its agent (plus the fidelity when se
 plus the folder when two sets would share a label). Per episode key the last record wins.
 Episodes recorded as ``sim_error`` (the simulator failed, not the agent) or ``decision_cap``
 (smoke runs) are not scored; the sim errors are shown as a ``sim_errors`` count in ``failures``,
-``driving`` and ``coverage`` and at the top of ``report.md``. ``agent_error`` episodes are the agent's failures and count everywhere.
+``driving`` and ``coverage`` and at the top of ``report.md``. ``agent_error`` episodes are the agent's
+failures and count everywhere.
 
 Views (``build_report``):
     success        success % in the paper's layout: task rows × town columns; with several sets

@@ -187,8 +187,8 @@ def plan_samples(x, y, yaw, v, s_hint, v_ref, speed_limit,
     Returns:
         ``(trajectories (S, T, 4), omega (S, T - 1), frenet (S, T, 2), V (S, T), c_obs (S,),
         hit (S,), dev (S,), v_ref)`` as :class:`.planner.PlanResult` names them; ``hit``: the
-        sample meets an obstacle (a follower of the ego's left out, ``PlannerConfig.ignore_followers``); ``dev``: its tie-breaking distance from the nominal sample;
-        ``v_ref``: capped for curves.
+        sample meets an obstacle (the ego's followers left out with ``PlannerConfig.ignore_followers``);
+        ``dev``: its tie-breaking distance from the nominal sample; ``v_ref``: capped for curves.
     """
     (dt, n_v, n_omega, hold, horizon, accel, decel, yaw_rate_max, max_curvature, lat_accel_max, k_theta, k_e,
      gain_speed, kappa_obs, sigma_obs, length, width, safety_margin, ds, curve_lat_accel, dev_w, dev_v,
@@ -319,9 +319,8 @@ def plan_samples(x, y, yaw, v, s_hint, v_ref, speed_limit,
     so0, eo0, tho = project_poses(ox, oy, oyaw, u_x0, u_y0, u_tx, u_ty, u_chord, u_s, u_h, u_dh)
     c_obs = obstacle_cost(SS[1:].copy(), EE[1:].copy(), so0, eo0, tho, ov, olength, owidth, future, length,
                           width, kappa_obs, sigma_obs, cutoff)
-    checked = np.ones(len(ox), np.bool_)
-    if ignore_followers:
-        checked = ~followers(so0, eo0, tho, olength, owidth, s0, e0, length, width)
+    checked = (~followers(so0, eo0, tho, olength, owidth, s0, e0, length, width) if ignore_followers
+               else np.ones(len(ox), np.bool_))
     hit = collisions(X[1:].copy(), Y[1:].copy(), PSI[1:].copy(), ox[checked], oy[checked], oyaw[checked],
                      ov[checked], olength[checked], owidth[checked], future,
                      0.5 * length + safety_margin, 0.5 * width + safety_margin)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import asdict, dataclass, field
+from dataclasses import fields as dataclass_fields
 
 TASKS: tuple[str, ...] = ("Straight", "OneTurn", "Navigation", "NavigationDynamic")
 """The CoRL2017 task categories, as used in env ids (``hbmp_bench/Town01-OneTurn-v0``)."""
@@ -110,16 +111,14 @@ class Suite:
         ``EPISODE_RULES_VERSION``). A field added after rules 11 (:data:`FIELDS_SINCE_RULES_11`) enters it only
         where it differs from its default: a new rule changes the hash of the suites that use it, not of
         those whose episodes it leaves as they were (and whose results stay valid)."""
-        fields = asdict(self)
-        for name, default in FIELDS_SINCE_RULES_11.items():
-            if fields[name] == default:
-                del fields[name]
+        defaults = {f.name: f.default for f in dataclass_fields(self)}
+        fields = {k: v for k, v in asdict(self).items() if k not in FIELDS_SINCE_RULES_11 or v != defaults[k]}
         blob = json.dumps({**fields, "episode_rules": EPISODE_RULES_VERSION}, sort_keys=True, default=list).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
 
 
-FIELDS_SINCE_RULES_11 = {"timeout_waits_at_lights": False}
-"""Suite fields added after episode rules 11, with the default at which they leave the definition hash as it was."""
+FIELDS_SINCE_RULES_11 = ("timeout_waits_at_lights",)
+"""Suite fields added after episode rules 11: at their default they leave the definition hash as it was."""
 
 
 @dataclass(frozen=True)

@@ -206,7 +206,8 @@ def test_a_close_follower_does_not_keep_the_ego_from_braking_for_a_queue():
     assert r.collision_free and r.chosen in (r.brake_index - 1, r.brake_index) and r.trajectory[-1, 3] < 2.0
     alone = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 10.5), v_ref=13.0, obs=obs[:1]))
     assert (r.costs[:, 2] > alone.costs[:, 2]).all()  # the follower still counts in c_obs
-    old = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 10.5), v_ref=13.0, obs=obs), PlannerConfig(ignore_followers=False))
+    old = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 10.5), v_ref=13.0, obs=obs),
+               PlannerConfig(ignore_followers=False))
     assert not old.collision_free and old.trajectory[-1, 3] > 10.5  # the defect this setting removes
 
 
