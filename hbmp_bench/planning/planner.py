@@ -344,7 +344,7 @@ class _Layout(NamedTuple):
     dec: np.ndarray  # (S,) deceleration of each sample's speed profile [m/s^2]
     t2: np.ndarray  # (T - 1,) squared future times [s^2]
     t2_sum: float  # sum of t2 [s^2]
-    params: np.ndarray  # (23,) the scalars :func:`.plan_kernel.plan_samples` reads (:func:`kernel_params`)
+    params: np.ndarray  # (24,) the scalars :func:`.plan_kernel.plan_samples` reads (:func:`kernel_params`)
     hold: int  # steps the omega(0) offset is held
 
 
