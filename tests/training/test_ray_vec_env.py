@@ -3,6 +3,7 @@ workers for the same seeds, clear errors when an actor dies, and ``hbmp-bench tr
 end to end."""
 
 import os
+import time
 
 import pytest
 import torch
@@ -29,6 +30,20 @@ def _roll_out(env):
     return out
 
 
+def _kill_and_wait_for_death(actor, timeout_s: float = 60.0) -> None:
+    """``ray.kill`` only asks Ray to end the actor: a call sent right after it may still be served. Wait
+    until a call fails, so that the step below meets a dead actor, the case under test."""
+    ray.kill(actor)
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            ray.get(actor.__ray_ready__.remote(), timeout=timeout_s)
+        except ray.exceptions.RayActorError:
+            return
+        time.sleep(0.05)
+    pytest.fail(f"the killed Ray actor still answered after {timeout_s:.0f} s")
+
+
 @pytest.mark.slow
 def test_ray_actors_roll_out_what_the_process_workers_do_and_fail_clearly():
     with SubprocVecEnv(CONFIG, num_envs=2, seed=5) as env:
@@ -42,7 +57,7 @@ def test_ray_actors_roll_out_what_the_process_workers_do_and_fail_clearly():
         assert (by_processes[0] == by_ray[0]).all()
         assert by_ray[-1][0]["occupancy"].shape == (2, 1, 64, 36)
 
-        ray.kill(env._actors[1])
+        _kill_and_wait_for_death(env._actors[1])
         with pytest.raises(WorkerError, match="worker 1 .*died"):
             env.step(torch.zeros((2, 1)))
     assert not ray.is_initialized()  # the local instance it started is shut down
