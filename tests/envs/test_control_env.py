@@ -26,11 +26,12 @@ def test_throttle_and_lane_keeping_steer_move_the_ego_along_its_lane():
         if terminated or truncated:
             break
     speed = info["scene"]["speed_mps"]
+    reset_info = env.reset(seed=1)[1]
     env.close()
     assert speed > 4.0
     assert abs(obs["road"][10]) * 3.5 < 0.5  # within 0.5 m of the lane centre
     assert info["duration_s"] == pytest.approx(0.1)  # one control step per action
-    assert "action_mask" not in info and "action_mask" not in env.reset(seed=1)[1], \
+    assert "action_mask" not in info and "action_mask" not in reset_info, \
         "no behaviors to mask, on reset as on step (a training batch mixes both)"
     for r, parts in rewards:
         assert parts["r_k"] < 0.0 and r == pytest.approx(parts["r_k"] + parts["r_T"])
