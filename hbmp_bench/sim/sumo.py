@@ -243,9 +243,6 @@ class SumoSim:
             "--time-to-teleport", "-1",
             "--ignore-route-errors", "true",
             "--pedestrian.model", "striping",
-            # SUMO lets a pedestrian held on a crossing for 10 s squeeze through whatever holds it, a car
-            # included, which the detectors count as the car's collision: held pedestrians wait instead
-            "--pedestrian.striping.jamtime.crossing", "-1",
             "--default.speeddev", "0.05",
         ]
         if SumoSim._libsumo_holder is None:
