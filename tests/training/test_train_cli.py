@@ -11,7 +11,7 @@ from hbmp_bench.cli import main
 from hbmp_bench.envs import make
 from hbmp_bench.locks import exclusive_lock
 from hbmp_bench.training.commands import TrainingRunning
-from hbmp_bench.training.runlog import EPISODE_COLUMNS, read_csv
+from hbmp_bench.training.runlog import EPISODE_COLUMNS, comparison_series, read_csv
 
 SCENARIO = "hbmp_bench/Town02-Straight-v0"
 COMMON = ["--scenario", SCENARIO, "--seed", "0", "--no-progress", "--fidelity", "event"]
@@ -273,3 +273,18 @@ def test_ppo_names_the_fields_of_the_dedicated_flags():
     assert config("--mask-actions", "--ppo", "mask_actions=true").mask_actions
     assert config().critic_warmup_episodes > 0 and _ppo_config(
         build_parser().parse_args(["train", "hbmp"]), None).critic_warmup_episodes == 0
+
+
+def test_the_ablation_figure_shows_a_run_that_learns_to_stand(tmp_path):
+    """The comparison figure's timeout panel: the share of episodes ending at the timeout, trailing."""
+    path = tmp_path / "episodes.csv"
+    rows = [(1, "violation", 0), (2, "goal", 1), (3, "timeout", 0), (4, "timeout", 0)]
+    with open(path, "w") as f:
+        f.write(",".join(EPISODE_COLUMNS) + "\n")
+        for episode, reason, success in rows:
+            values = {"episode": episode, "end_reason": reason, "success": success, "r_T": -1, "r_T_plus_r_t": -2}
+            f.write(",".join(str(values.get(c, 0)) for c in EPISODE_COLUMNS) + "\n")
+    series = comparison_series(read_csv(str(path)), window=2)
+    assert list(series) == ["r_T", "r_T_plus_r_t", "success", "timeout"]
+    assert series["timeout"].tolist() == [0.0, 0.0, 0.5, 1.0]
+    assert series["success"].tolist() == [0.0, 0.5, 0.5, 0.0]
