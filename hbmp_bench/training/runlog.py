@@ -150,14 +150,17 @@ def plot_run(folder: str, title: str, window: int = 50) -> str:
     return path
 
 
+COMPARISON_PANELS = (("r_T", "r_T", None), ("r_T_plus_r_t", "r_T + Σr_t", None),
+                     ("success", "success rate", (-0.02, None)), ("timeout", "timeout rate", (-0.02, 1.02)))
+"""The ablation figure's panels: (series, y label, y limits or None)."""
+
+
 def comparison_series(episodes: dict[str, np.ndarray], window: int) -> dict[str, np.ndarray]:
-    """The ablation figure's panels for one run: trailing means over ``window`` episodes of r_T,
-    r_T + Σr_t, success and ending at the timeout, each (episodes,), from :func:`read_csv`'s columns."""
-    timeout = (episodes["end_reason"] == "timeout").astype(float)
-    return {"r_T": moving_average(episodes["r_T"], window),
-            "r_T_plus_r_t": moving_average(episodes["r_T_plus_r_t"], window),
-            "success": moving_average(episodes["success"], window),
-            "timeout": moving_average(timeout, window)}
+    """The ablation figure's panels for one run (:data:`COMPARISON_PANELS` order): trailing means over
+    ``window`` episodes of r_T, r_T + Σr_t, success and ending at the timeout, each (episodes,), from
+    :func:`read_csv`'s columns."""
+    columns = {**episodes, "timeout": (episodes["end_reason"] == "timeout").astype(float)}
+    return {key: moving_average(columns[key], window) for key, _, _ in COMPARISON_PANELS}
 
 
 def plot_comparison(folders: Sequence[str], labels: Sequence[str], out: str, window: int = 50) -> str:
@@ -171,15 +174,15 @@ def plot_comparison(folders: Sequence[str], labels: Sequence[str], out: str, win
 
     if len(folders) != len(labels):
         raise ValueError("give one label per run folder")
-    fig, axes = plt.subplots(1, 4, figsize=(20, 3.8), sharey=False)
+    fig, axes = plt.subplots(1, len(COMPARISON_PANELS), figsize=(5 * len(COMPARISON_PANELS), 3.8), sharey=False)
     for k, (folder, label) in enumerate(zip(folders, labels)):
         eps = read_csv(os.path.join(folder, "episodes.csv"))
         for ax, series in zip(axes, comparison_series(eps, window).values()):
             ax.plot(eps["episode"], series, color=f"C{k}", label=label)
-    axes[0].set(xlabel="episode", ylabel=f"r_T (mean of {window})")
-    axes[1].set(xlabel="episode", ylabel=f"r_T + Σr_t (mean of {window})")
-    axes[2].set(xlabel="episode", ylabel=f"success rate (mean of {window})", ylim=(-0.02, None))
-    axes[3].set(xlabel="episode", ylabel=f"timeout rate (mean of {window})", ylim=(-0.02, 1.02))
+    for ax, (_, name, limits) in zip(axes, COMPARISON_PANELS):
+        ax.set(xlabel="episode", ylabel=f"{name} (mean of {window})")
+        if limits is not None:
+            ax.set_ylim(*limits)
     axes[2].legend(fontsize=8)
     fig.tight_layout()
     _save_fig(fig, out)
