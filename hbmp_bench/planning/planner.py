@@ -69,9 +69,10 @@ feasible sample is chosen (ties within ``tie_tolerance`` go to the sample neares
 nominal one), among those that stay on the road where any does (the problem's ``corridor``, an
 addition to the paper: its costs have no road edge, and with a car alongside, re-planning at 10 Hz
 chose the sample that swerved away first again and again, a ratchet that drifted the ego off a
-highway's outer lane, 1.1 m off its centre at 20 m/s); if none is feasible, ``collision_free`` is False and the chosen sample is the cheapest one
-(``infeasible_fallback="min_cost"``, default) or the full brake (``"brake"``); the full
-brake index is always reported in :attr:`PlanResult.brake_index`.
+highway's outer lane, 1.1 m off its centre at 20 m/s); if none is feasible, ``collision_free`` is False and the chosen sample is the full brake
+(``infeasible_fallback="brake"``, default) or the cheapest one (``"min_cost"``, the default before the
+pedestrian-collision study of ``docs/experiments/planner-brake-fallback/``: with a pedestrian stopped on a
+crossing it kept 3-5 m/s into them); the full brake index is always reported in :attr:`PlanResult.brake_index`.
 """
 
 from __future__ import annotations
@@ -141,8 +142,8 @@ class PlannerConfig:
             ``|omega(0) - omega_nom|`` + ``|v(0) - v|``) is chosen. Without it, exact ties
             (e.g. no obstacles: the paper's costs do not depend on ``omega``) would pick an
             arbitrary swerving sample.
-        infeasible_fallback: ``"min_cost"`` or ``"brake"`` (choice when nothing is
-            collision-free).
+        infeasible_fallback: ``"brake"`` (the full brake) or ``"min_cost"`` (the cheapest sample): the
+            choice when nothing is collision-free.
         curve_lat_accel: lateral acceleration the speed profile allows in curves [m/s^2]
             (``inf`` disables the curve speed cap, see :func:`curve_speed_cap`).
         ignore_followers: leave out of the collision check the obstacles that follow the ego (wholly
@@ -179,7 +180,7 @@ class PlannerConfig:
     safety_margin: float = 0.2
     path_resolution: float = 1.0
     tie_tolerance: float = 1e-3
-    infeasible_fallback: str = "min_cost"
+    infeasible_fallback: str = "brake"
     curve_lat_accel: float = 2.0
     ignore_followers: bool = True
 

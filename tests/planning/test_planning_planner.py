@@ -207,8 +207,11 @@ def test_a_close_follower_does_not_keep_the_ego_from_braking_for_a_queue():
     alone = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 10.5), v_ref=13.0, obs=obs[:1]))
     assert (r.costs[:, 2] > alone.costs[:, 2]).all()  # the follower still counts in c_obs
     old = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 10.5), v_ref=13.0, obs=obs),
-               PlannerConfig(ignore_followers=False))
+               PlannerConfig(ignore_followers=False, infeasible_fallback="min_cost"))
     assert not old.collision_free and old.trajectory[-1, 3] > 10.5  # the defect this setting removes
+    braking = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 10.5), v_ref=13.0, obs=obs),
+                   PlannerConfig(ignore_followers=False))
+    assert not braking.collision_free and braking.chosen == braking.brake_index  # the brake fallback alone
 
 
 def test_only_a_follower_in_the_egos_line_is_left_out_of_the_collision_check():
@@ -229,12 +232,13 @@ def test_only_a_follower_in_the_egos_line_is_left_out_of_the_collision_check():
 
 def test_unavoidable_obstacle_is_flagged():
     p = problem(obs=[car(8.0)])  # 3 m gap at 10 m/s: even the full brake hits it
-    r = plan(p)
-    assert not r.feasible.any() and not r.collision_free
-    assert r.chosen == int(np.argmin(r.total)) or r.total[r.chosen] <= r.total.min() + 1e-3
-    rb = plan(p, PlannerConfig(infeasible_fallback="brake"))
-    assert rb.chosen == rb.brake_index and not rb.collision_free
+    rb = plan(p)  # the default fallback: the full brake
+    assert not rb.feasible.any() and not rb.collision_free
+    assert rb.chosen == rb.brake_index
     assert rb.trajectory[-1, 3] == 0.0
+    r = plan(p, PlannerConfig(infeasible_fallback="min_cost"))
+    assert not r.collision_free
+    assert r.chosen == int(np.argmin(r.total)) or r.total[r.chosen] <= r.total.min() + 1e-3
 
 
 def test_obstacle_ahead_makes_keep_costlier_than_change_left():
