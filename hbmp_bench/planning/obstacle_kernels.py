@@ -2,7 +2,7 @@
 
 :func:`.planner.plan` scores S = 65 samples over T = 30 steps against K obstacles (7 on
 average in town traffic, up to ~20). Its numpy form (:func:`.planner.obstacle_cost_reference`,
-:func:`.planner.collisions_reference`) spends most of its time in the per-call overhead of
+:func:`.planner.first_contacts_reference`) spends most of its time in the per-call overhead of
 ~40 small array operations; these kernels run the same arithmetic as scalar loops.
 
 * :func:`project_poses` -- :meth:`.frame.Path.project` without a hint (nearest segment over the
@@ -11,8 +11,8 @@ average in town traffic, up to ~20). Its numpy form (:func:`.planner.obstacle_co
   (obstacle, step) pair is skipped when its exponent exceeds ``cutoff`` for every sample). The
   numpy reference sums in float32, the kernel in float64: they agree to ~1e-6 relative
   (tested to ``5e-6 c_obs + 1e-7``).
-* :func:`collisions` -- the same broad phases and separating-axis test in float64 as the
-  reference: the same booleans.
+* :func:`first_contacts` -- the same broad phases and separating-axis test in float64 as the
+  reference: the same first contact step of every sample.
 
 Like :mod:`.rollout`, the code stays numpy-only: with ``NUMBA_DISABLE_JIT=1`` (or ``.py_func``)
 it runs as plain Python. numba is imported here and in :mod:`.rollout` only; :func:`.planner.plan`
@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["project_poses", "obstacle_cost", "collisions", "followers"]
+__all__ = ["project_poses", "obstacle_cost", "first_contacts", "followers"]
 
 
 @njit(cache=True, nogil=True)
@@ -146,8 +146,9 @@ def followers(so, eo, theta, olength, owidth, s0, e0, length, width):
 
 
 @njit(cache=True, nogil=True)
-def collisions(X, Y, PSI, ox, oy, oyaw, ov, olength, owidth, times, half_length, half_width):
-    """(S,) True where a sample's footprint meets an obstacle at any step.
+def first_contacts(X, Y, PSI, ox, oy, oyaw, ov, olength, owidth, times, half_length, half_width):
+    """(S,) int64: the first step (index into ``times``) at which a sample's footprint meets an obstacle;
+    ``T`` where it meets none (the sample is collision-free).
 
     Args:
         X, Y, PSI: (T, S) ego footprint centres [m] and headings [rad] at ``times`` (T,) [s].
@@ -159,9 +160,9 @@ def collisions(X, Y, PSI, ox, oy, oyaw, ov, olength, owidth, times, half_length,
     sample), then the exact separating-axis test of the two oriented rectangles.
     """
     T, S = X.shape
-    hit = np.zeros(S, dtype=np.bool_)
+    first = np.full(S, T, dtype=np.int64)
     if len(ox) == 0:
-        return hit
+        return first
     x_lo = np.empty(T)
     x_hi = np.empty(T)
     y_lo = np.empty(T)
@@ -189,7 +190,7 @@ def collisions(X, Y, PSI, ox, oy, oyaw, ov, olength, owidth, times, half_length,
             if cx + reach < x_lo[t] or cx - reach > x_hi[t] or cy + reach < y_lo[t] or cy - reach > y_hi[t]:
                 continue
             for j in range(S):
-                if hit[j]:
+                if first[j] <= t:  # an earlier contact (this obstacle's steps come in order)
                     continue
                 dx = cx - X[t, j]
                 dy = cy - Y[t, j]
@@ -207,5 +208,5 @@ def collisions(X, Y, PSI, ox, oy, oyaw, ov, olength, owidth, times, half_length,
                     continue
                 if abs(-dx * so + dy * co) > hw_o + half_length * sd + half_width * cd:
                     continue
-                hit[j] = True
-    return hit
+                first[j] = t
+    return first

@@ -26,7 +26,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .obstacle_kernels import collisions, followers, obstacle_cost, project_poses
+from .obstacle_kernels import first_contacts, followers, obstacle_cost, project_poses
 from .rollout import roll_out
 from .tracking_kernel import bisect_right
 
@@ -186,8 +186,9 @@ def plan_samples(x, y, yaw, v, s_hint, v_ref, speed_limit,
 
     Returns:
         ``(trajectories (S, T, 4), omega (S, T - 1), frenet (S, T, 2), V (S, T), c_obs (S,),
-        hit (S,), dev (S,), v_ref)`` as :class:`.planner.PlanResult` names them; ``hit``: the
-        sample meets an obstacle (the ego's followers left out with ``PlannerConfig.ignore_followers``);
+        first (S,), dev (S,), v_ref)`` as :class:`.planner.PlanResult` names them; ``first``: the step
+        (index into ``times[1:]``) at which the sample first meets an obstacle, ``T - 1`` where it meets none
+        (the ego's followers left out with ``PlannerConfig.ignore_followers``);
         ``dev``: its tie-breaking distance from the nominal sample; ``v_ref``: capped for curves.
     """
     (dt, n_v, n_omega, hold, horizon, accel, decel, yaw_rate_max, max_curvature, lat_accel_max, k_theta, k_e,
@@ -321,9 +322,9 @@ def plan_samples(x, y, yaw, v, s_hint, v_ref, speed_limit,
                           width, kappa_obs, sigma_obs, cutoff)
     checked = (~followers(so0, eo0, tho, olength, owidth, s0, e0, length, width) if ignore_followers
                else np.ones(len(ox), np.bool_))
-    hit = collisions(X[1:].copy(), Y[1:].copy(), PSI[1:].copy(), ox[checked], oy[checked], oyaw[checked],
-                     ov[checked], olength[checked], owidth[checked], future,
-                     0.5 * length + safety_margin, 0.5 * width + safety_margin)
+    first = first_contacts(X[1:].copy(), Y[1:].copy(), PSI[1:].copy(), ox[checked], oy[checked], oyaw[checked],
+                           ov[checked], olength[checked], owidth[checked], future,
+                           0.5 * length + safety_margin, 0.5 * width + safety_margin)
 
     traj = np.empty((S, T, 4))
     frenet = np.empty((S, T, 2))
@@ -338,4 +339,4 @@ def plan_samples(x, y, yaw, v, s_hint, v_ref, speed_limit,
             frenet[j, t, 1] = EE[t, j]
         for t in range(n):
             omega[j, t] = W[t, j]
-    return traj, omega, frenet, V, c_obs, hit, dev, v_ref
+    return traj, omega, frenet, V, c_obs, first, dev, v_ref

@@ -62,17 +62,20 @@ Compiled: :func:`plan` runs the samples, roll-outs, ``c_obs`` and collision chec
 kernel (:func:`.plan_kernel.plan_samples`, which calls :mod:`.rollout` and :mod:`.obstacle_kernels`);
 ``c_velocity``, ``c_dist`` and the choice stay numpy. :func:`plan_reference` is the same call in numpy
 around the roll-out and obstacle kernels; the tests hold the two to equal arrays, bit for bit. The
-obstacle kernels' own numpy form is :func:`obstacle_cost_reference` and :func:`collisions_reference`:
-the same collisions, ``c_obs`` within 5e-6 relative (the reference sums in float32), the same chosen
+obstacle kernels' own numpy form is :func:`obstacle_cost_reference` and :func:`first_contacts_reference`:
+the same first contacts, ``c_obs`` within 5e-6 relative (the reference sums in float32), the same chosen
 trajectory on recorded problems. The cheapest
 feasible sample is chosen (ties within ``tie_tolerance`` go to the sample nearest the
 nominal one), among those that stay on the road where any does (the problem's ``corridor``, an
 addition to the paper: its costs have no road edge, and with a car alongside, re-planning at 10 Hz
 chose the sample that swerved away first again and again, a ratchet that drifted the ego off a
-highway's outer lane, 1.1 m off its centre at 20 m/s); if none is feasible, ``collision_free`` is False and the chosen sample is the full brake
-(``infeasible_fallback="brake"``, default) or the cheapest one (``"min_cost"``, the default before the
-pedestrian-collision study of ``docs/experiments/planner-brake-fallback/``: with a pedestrian stopped on a
-crossing it kept 3-5 m/s into them); the full brake index is always reported in :attr:`PlanResult.brake_index`.
+highway's outer lane, 1.1 m off its centre at 20 m/s); if none is feasible, ``collision_free`` is False and the chosen sample is the one whose first predicted contact
+comes latest, the slowest at that contact among ties (``infeasible_fallback="latest_contact"``, default: the
+full brake before a pedestrian stopped ahead, moving on before a car closing from behind), the full brake
+(``"brake"``) or the cheapest one (``"min_cost"``). ``min_cost`` kept 3-5 m/s into pedestrians stopped on a
+crossing; ``brake`` stopped a slow lane change in front of the car it was leaving behind, which ran into it
+(``docs/experiments/planner-brake-fallback/``). The full brake index is always reported in
+:attr:`PlanResult.brake_index`.
 """
 
 from __future__ import annotations
@@ -100,6 +103,10 @@ def _pos(name, value, allow_zero=False, allow_inf=False):
     if not ok or value != value or (not allow_inf and math.isinf(value)):
         rel = ">= 0" if allow_zero else "> 0"
         raise ValueError(f"PlannerConfig.{name} must be finite and {rel}, got {value!r}")
+
+
+INFEASIBLE_FALLBACKS = ("latest_contact", "brake", "min_cost")
+"""The choices of :attr:`PlannerConfig.infeasible_fallback`."""
 
 
 @dataclass(frozen=True)
@@ -142,8 +149,9 @@ class PlannerConfig:
             ``|omega(0) - omega_nom|`` + ``|v(0) - v|``) is chosen. Without it, exact ties
             (e.g. no obstacles: the paper's costs do not depend on ``omega``) would pick an
             arbitrary swerving sample.
-        infeasible_fallback: ``"brake"`` (the full brake) or ``"min_cost"`` (the cheapest sample): the
-            choice when nothing is collision-free.
+        infeasible_fallback: the choice when nothing is collision-free: ``"latest_contact"`` (the sample
+            whose first predicted contact comes latest; ties to the slowest at that contact), ``"brake"``
+            (the full brake) or ``"min_cost"`` (the cheapest sample).
         curve_lat_accel: lateral acceleration the speed profile allows in curves [m/s^2]
             (``inf`` disables the curve speed cap, see :func:`curve_speed_cap`).
         ignore_followers: leave out of the collision check the obstacles that follow the ego (wholly
@@ -180,7 +188,7 @@ class PlannerConfig:
     safety_margin: float = 0.2
     path_resolution: float = 1.0
     tie_tolerance: float = 1e-3
-    infeasible_fallback: str = "brake"
+    infeasible_fallback: str = "latest_contact"
     curve_lat_accel: float = 2.0
     ignore_followers: bool = True
 
@@ -204,9 +212,9 @@ class PlannerConfig:
             raise ValueError(
                 f"PlannerConfig.horizon ({self.horizon}) must be a positive multiple of "
                 f"dt ({self.dt})")
-        if self.infeasible_fallback not in ("min_cost", "brake"):
+        if self.infeasible_fallback not in INFEASIBLE_FALLBACKS:
             raise ValueError(
-                f"PlannerConfig.infeasible_fallback must be 'min_cost' or 'brake', "
+                f"PlannerConfig.infeasible_fallback must be one of {', '.join(INFEASIBLE_FALLBACKS)}, "
                 f"got {self.infeasible_fallback!r}")
 
     @property
@@ -288,9 +296,11 @@ class PlanResult:
         costs: (S, 3) ``[c_velocity, c_dist, c_obs]`` (see :data:`COST_NAMES`).
         total: (S,) ``c_total``.
         feasible: (S,) collision-free mask.
+        contact_time: (S,) time of each sample's first predicted contact with a checked obstacle [s];
+            ``inf`` where it has none (the feasible samples).
         on_road: (S,) mask of the samples that stay within the problem's ``corridor``.
         chosen: index of the chosen sample: the cheapest collision-free one on the road, else the
-            cheapest collision-free one (see the module docstring).
+            cheapest collision-free one, else the ``infeasible_fallback``'s (see the module docstring).
         collision_free: whether the chosen sample is collision-free.
         brake_index: index of the full-brake sample.
         v_ref: reference speed used [m/s]: the problem's, capped for curves ahead
@@ -304,6 +314,7 @@ class PlanResult:
     costs: np.ndarray
     total: np.ndarray
     feasible: np.ndarray
+    contact_time: np.ndarray
     on_road: np.ndarray
     chosen: int
     collision_free: bool
@@ -397,21 +408,22 @@ def _sat_overlap(dx, dy, ce, se, hl_e, hw_e, co, so, hl_o, hw_o):
     return ~sep
 
 
-def collisions_reference(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndarray:
-    """(S,) True where a sample's footprint meets an obstacle at any step of ``times``.
+def first_contacts_reference(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndarray:
+    """(S,) int: the first step (index into ``times``) at which a sample's footprint meets an obstacle;
+    ``T = len(times)`` where it meets none.
 
-    The numpy reference of the compiled :func:`.obstacle_kernels.collisions` that :func:`plan`
-    uses (the tests hold the two to the same booleans).
+    The numpy reference of the compiled :func:`.obstacle_kernels.first_contacts` that :func:`plan`
+    uses (the tests hold the two to the same steps).
 
     ``X, Y, PSI``: (T, S) ego poses (time-major) at ``times`` (T,). Broad phase 1:
     obstacle bounding circles against the per-step bounding box of all samples, (K, T);
     broad phase 2: bounding circles against each sample on the surviving (obstacle, step)
     pairs; narrow phase: exact separating-axis test.
     """
-    S = X.shape[1]
-    hit = np.zeros(S, dtype=bool)
+    T, S = X.shape
+    first = np.full(S, T, dtype=np.int64)
     if len(obs) == 0:
-        return hit
+        return first
     hl_e = 0.5 * cfg.length + cfg.safety_margin
     hw_e = 0.5 * cfg.width + cfg.safety_margin
     r_e = math.hypot(hl_e, hw_e)
@@ -421,20 +433,20 @@ def collisions_reference(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -
             & (oy + reach >= Y.min(axis=1)) & (oy - reach <= Y.max(axis=1)))
     ki, ti = np.nonzero(near)
     if len(ki) == 0:
-        return hit
+        return first
     dx = ox[ki, ti][:, None] - np.take(X, ti, axis=0)  # (P, S)
     dy = oy[ki, ti][:, None] - np.take(Y, ti, axis=0)
     rr = reach[ki]
     pi, si = np.nonzero(dx * dx + dy * dy <= rr * rr)
     if len(si) == 0:
-        return hit
+        return first
     ki, ti = ki[pi], ti[pi]
     psi = PSI[ti, si]
     yaw_o = obs.yaw[ki]
     over = _sat_overlap(dx[pi, si], dy[pi, si], np.cos(psi), np.sin(psi), hl_e, hw_e,
                         np.cos(yaw_o), np.sin(yaw_o), 0.5 * obs.length[ki], 0.5 * obs.width[ki])
-    hit[si[over]] = True
-    return hit
+    np.minimum.at(first, si[over], ti[over])
+    return first
 
 
 #: Obstacle-step pairs whose ``c_obs`` exponent exceeds this for every sample are skipped
@@ -507,15 +519,15 @@ def collision_checked(obs: Obstacles, lp: Path, s0: float, e0: float, cfg: Plann
                                  float(cfg.width)))
 
 
-def _collisions(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndarray:
-    """(S,) True where a sample's footprint (``X, Y, PSI`` (T, S) at ``times`` (T,)) meets an
-    obstacle (compiled: :func:`.obstacle_kernels.collisions`; numpy reference:
-    :func:`collisions_reference`)."""
-    from .obstacle_kernels import collisions
+def _first_contacts(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.ndarray:
+    """(S,) the first step (index into ``times`` (T,)) at which a sample's footprint (``X, Y, PSI``
+    (T, S)) meets an obstacle, ``T`` where none (compiled: :func:`.obstacle_kernels.first_contacts`;
+    numpy reference: :func:`first_contacts_reference`)."""
+    from .obstacle_kernels import first_contacts
 
     if len(obs) == 0:
-        return np.zeros(X.shape[1], dtype=bool)
-    return collisions(np.ascontiguousarray(X), np.ascontiguousarray(Y), np.ascontiguousarray(PSI),
+        return np.full(X.shape[1], X.shape[0], dtype=np.int64)
+    return first_contacts(np.ascontiguousarray(X), np.ascontiguousarray(Y), np.ascontiguousarray(PSI),
                       obs.x, obs.y, obs.yaw, obs.v, obs.length, obs.width,
                       np.ascontiguousarray(times, dtype=np.float64), 0.5 * cfg.length + cfg.safety_margin,
                       0.5 * cfg.width + cfg.safety_margin)
@@ -579,7 +591,7 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
     layout = _layout(cfg)
     ego, path, obs = problem.ego, problem.path, problem.obstacles
     ps, x0, y0, tx, ty, chord, heading, kappa, dh, dk = path.segment_arrays()
-    traj, omega, frenet, V, c_obs, hit, dev, v_ref = plan_samples(
+    traj, omega, frenet, V, c_obs, first, dev, v_ref = plan_samples(
         float(ego.x), float(ego.y), float(ego.yaw), float(ego.v),
         np.nan if problem.s_hint is None else float(problem.s_hint), float(problem.v_ref), float(problem.speed_limit),
         ps, x0, y0, tx, ty, chord, heading, kappa, dh, dk,
@@ -588,7 +600,7 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
     Vf = V[:, 1:]
     c_vel = (np.abs(v_ref - Vf) @ layout.t2) / layout.t2_sum
     c_dist = 1.0 / (1.0 + np.abs(Vf).sum(axis=1))
-    return _choose(cfg, layout.times, traj, omega, frenet, c_vel, c_dist, c_obs, ~hit, dev, v_ref,
+    return _choose(cfg, layout.times, traj, omega, frenet, c_vel, c_dist, c_obs, first, dev, v_ref,
                    on_road(frenet, problem.corridor))
 
 
@@ -605,23 +617,31 @@ def on_road(frenet: np.ndarray, corridor: tuple[float, float, float]) -> np.ndar
     return ~out.any(axis=1)
 
 
-def _choose(cfg: PlannerConfig, times, trajectories, omega, frenet, c_vel, c_dist, c_obs, feasible, dev,
+def _choose(cfg: PlannerConfig, times, trajectories, omega, frenet, c_vel, c_dist, c_obs, first, dev,
             v_ref, road) -> PlanResult:
-    """The cheapest feasible sample, on the road where one is (ties to the nearest the nominal one; see
-    the module docstring)."""
+    """The cheapest feasible sample, on the road where one is (ties to the nearest the nominal one), else
+    the ``infeasible_fallback``'s (see the module docstring). ``first``: (S,) each sample's first contact
+    step, an index into ``times[1:]`` (``len(times) - 1``: none)."""
     total = cfg.w_velocity * c_vel + cfg.w_dist * c_dist + cfg.w_obs * c_obs
     brake_index = len(total) - 1
+    n = len(times) - 1
+    feasible = first >= n
+    contact_time = np.where(feasible, np.inf, times[1:][np.minimum(first, n - 1)])
     any_feasible = feasible.any()
     if any_feasible or cfg.infeasible_fallback == "min_cost":
         preferred = feasible & road if (feasible & road).any() else feasible
         cand = np.where(preferred, total, np.inf) if any_feasible else total
         tied = cand <= cand.min() + cfg.tie_tolerance
         chosen = int(np.argmin(np.where(tied, dev, np.inf)))
-    else:
+    elif cfg.infeasible_fallback == "brake":
         chosen = brake_index
+    else:  # latest_contact: the latest first contact, the slowest there among ties
+        impact_speed = np.abs(trajectories[np.arange(len(first)), first + 1, 3])
+        latest = first == first.max()
+        chosen = int(np.argmin(np.where(latest, impact_speed, np.inf)))
     return PlanResult(times=times, trajectories=trajectories, omega=omega, frenet=frenet,
-                      costs=np.stack([c_vel, c_dist, c_obs], axis=1), total=total, feasible=feasible, on_road=road,
-                      chosen=chosen,
+                      costs=np.stack([c_vel, c_dist, c_obs], axis=1), total=total, feasible=feasible,
+                      contact_time=contact_time, on_road=road, chosen=chosen,
                       collision_free=bool(feasible[chosen]), brake_index=brake_index, v_ref=float(v_ref))
 
 
@@ -683,10 +703,10 @@ def plan_reference(problem: PlanningProblem, cfg: PlannerConfig | None = None) -
     obs = problem.obstacles
     future = times[1:]
     c_obs = _obstacle_cost(SS[1:], EE[1:], obs, lp, future, cfg)
-    feasible = ~_collisions(X[1:], Y[1:], PSI[1:], collision_checked(obs, lp, s0, e0, cfg), future, cfg)
+    first = _first_contacts(X[1:], Y[1:], PSI[1:], collision_checked(obs, lp, s0, e0, cfg), future, cfg)
     frenet = np.stack([SS.T, EE.T], axis=2)
     return _choose(cfg, times, np.stack([X.T, Y.T, PSI.T, V], axis=2), np.ascontiguousarray(W.T),
-                   frenet, c_vel, c_dist, c_obs, feasible, dev, v_ref, on_road(frenet, problem.corridor))
+                   frenet, c_vel, c_dist, c_obs, first, dev, v_ref, on_road(frenet, problem.corridor))
 
 
 def compile_kernels(cfg: PlannerConfig | None = None) -> None:

@@ -69,10 +69,11 @@ def test_kernels_agree_with_the_numpy_reference_on_random_scenes():
         times = result.times[1:]
         obs = random_obstacles(rng, int(rng.integers(1, 5)), np.array([30.0, 2.0]), 12.0)
 
-        hit = planner._collisions(X, Y, PSI, obs, times, cfg)
-        hit_ref = planner.collisions_reference(X, Y, PSI, obs, times, cfg)
-        np.testing.assert_array_equal(hit, hit_ref)
-        mixed += 0 < hit_ref.sum() < len(hit_ref)
+        first = planner._first_contacts(X, Y, PSI, obs, times, cfg)
+        first_ref = planner.first_contacts_reference(X, Y, PSI, obs, times, cfg)
+        np.testing.assert_array_equal(first, first_ref)
+        hit = first_ref < len(times)
+        mixed += 0 < hit.sum() < len(hit) and len(np.unique(first_ref[hit])) > 1  # contacts at different steps
 
         c = planner._obstacle_cost(SS, EE, obs, lp, times, cfg)
         c_ref = planner.obstacle_cost_reference(SS, EE, obs, lp, times, cfg)
@@ -88,7 +89,7 @@ def test_compiled_kernels_equal_their_python_source():
     o = rng.uniform(0.0, 30.0, (2, K))
     args = (X, Y, PSI, o[0], o[1], rng.uniform(-3, 3, K), rng.uniform(0, 5, K), rng.uniform(1, 5, K),
             rng.uniform(0.5, 2, K), np.arange(1, T + 1) * 0.1, 2.5, 1.15)
-    np.testing.assert_array_equal(obstacle_kernels.collisions(*args), obstacle_kernels.collisions.py_func(*args))
+    np.testing.assert_array_equal(obstacle_kernels.first_contacts(*args), obstacle_kernels.first_contacts.py_func(*args))
     cost_args = (X, Y, o[0], o[1], rng.uniform(-1, 1, K), rng.uniform(0, 5, K), rng.uniform(1, 5, K),
                  rng.uniform(0.5, 2, K), np.arange(1, T + 1) * 0.1, 4.6, 1.9, 20.0, 10.0, 10.0)
     np.testing.assert_allclose(obstacle_kernels.obstacle_cost(*cost_args),
@@ -102,12 +103,13 @@ def test_same_chosen_trajectory_as_the_reference_on_recorded_problems(monkeypatc
     cfg = PlannerConfig(ignore_followers=ignore_followers)
     compiled = [plan(p, cfg) for p in problems]
     monkeypatch.setattr(planner, "_obstacle_cost", planner.obstacle_cost_reference)
-    monkeypatch.setattr(planner, "_collisions", planner.collisions_reference)
+    monkeypatch.setattr(planner, "_first_contacts", planner.first_contacts_reference)
     reference = [planner.plan_reference(p, cfg) for p in problems]
     # the collision check decides some: 34 of the 79 problems with every obstacle checked, 7 without the followers
     assert sum(not r.feasible.all() for r in reference) >= decided
     for a, b in zip(compiled, reference):
         np.testing.assert_array_equal(a.feasible, b.feasible)
+        np.testing.assert_array_equal(a.contact_time, b.contact_time)
         np.testing.assert_allclose(a.costs, b.costs, rtol=C_OBS_RTOL, atol=C_OBS_ATOL)
         assert a.chosen == b.chosen
         np.testing.assert_array_equal(a.trajectory, b.trajectory)

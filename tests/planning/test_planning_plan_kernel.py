@@ -9,13 +9,14 @@ from test_planning_obstacle_kernels import corner_path, random_obstacles, record
 from hbmp_bench.planning import Path, PlannerConfig, PlanningProblem, VehicleState, plan, planner
 from hbmp_bench.planning.plan_kernel import pairwise_sum
 
-ARRAYS = ("times", "trajectories", "omega", "frenet", "costs", "total", "feasible")
+ARRAYS = ("times", "trajectories", "omega", "frenet", "costs", "total", "feasible", "contact_time")
 CONFIGS = {
     "default": PlannerConfig(),
     "paper gains, no limits": PlannerConfig(gain_speed=np.inf, lat_accel_max=np.inf, curve_lat_accel=np.inf),
     "one sample, brake fallback": PlannerConfig(n_v=1, n_omega=1, horizon=2.0, infeasible_fallback="brake"),
     "fine path, long horizon": PlannerConfig(path_resolution=0.5, horizon=5.0, n_v=5, n_omega=11),
     "followers checked": PlannerConfig(ignore_followers=False),
+    "followers checked, min_cost fallback": PlannerConfig(ignore_followers=False, infeasible_fallback="min_cost"),
 }
 
 

@@ -209,9 +209,10 @@ def test_a_close_follower_does_not_keep_the_ego_from_braking_for_a_queue():
     old = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 10.5), v_ref=13.0, obs=obs),
                PlannerConfig(ignore_followers=False, infeasible_fallback="min_cost"))
     assert not old.collision_free and old.trajectory[-1, 3] > 10.5  # the defect this setting removes
-    braking = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 10.5), v_ref=13.0, obs=obs),
-                   PlannerConfig(ignore_followers=False))
-    assert not braking.collision_free and braking.chosen == braking.brake_index  # the brake fallback alone
+    latest = plan(problem(ego=VehicleState(0.0, 0.0, 0.0, 10.5), v_ref=13.0, obs=obs),
+                  PlannerConfig(ignore_followers=False))
+    assert not latest.collision_free  # the default fallback alone: the latest contact, on a queue ahead
+    assert latest.contact_time[latest.chosen] == latest.contact_time.max()
 
 
 def test_only_a_follower_in_the_egos_line_is_left_out_of_the_collision_check():
@@ -232,13 +233,34 @@ def test_only_a_follower_in_the_egos_line_is_left_out_of_the_collision_check():
 
 def test_unavoidable_obstacle_is_flagged():
     p = problem(obs=[car(8.0)])  # 3 m gap at 10 m/s: even the full brake hits it
-    rb = plan(p)  # the default fallback: the full brake
-    assert not rb.feasible.any() and not rb.collision_free
+    r = plan(p)  # the default fallback: the latest first contact, here the full brake's
+    assert not r.feasible.any() and not r.collision_free
+    assert np.isfinite(r.contact_time).all() and r.contact_time[r.chosen] == r.contact_time.max()
+    assert r.chosen == r.brake_index and r.trajectory[-1, 3] == 0.0
+    assert (r.contact_time == r.contact_time[0]).all()  # every sample meets it at 0.4 s: the slowest there
+    rb = plan(p, PlannerConfig(infeasible_fallback="brake"))
+    assert rb.chosen == rb.brake_index and not rb.collision_free
+    rm = plan(p, PlannerConfig(infeasible_fallback="min_cost"))
+    assert not rm.collision_free
+    assert rm.chosen == int(np.argmin(rm.total)) or rm.total[rm.chosen] <= rm.total.min() + 1e-3
+    assert rm.trajectory[-1, 3] > 0.0  # the cheapest keeps going: the defect the default removes
+
+
+def test_a_threat_from_behind_is_not_met_by_braking():
+    """Recorded in ``hbmp-s``'s Town03 Navigation-dynamic episode 34 (``hbmp`` suite): a lane change at
+    2 m/s, the ego turned towards the new lane, the queued car it leaves behind accelerating into the gap
+    (5.5-5.8 m/s at the contact). Nothing is collision-free; the full brake stopped the ego in front of it and it
+    ran into the ego. The latest first contact keeps moving and puts the contact off."""
+    obs = [car(-7.0, v=5.5)]  # in the lane the ego leaves, 2.4 m between the two
+    ego = VehicleState(0.0, 1.5, 0.3, 2.0)  # 1.5 m into the change, 17 degrees towards the left lane
+    cfg = PlannerConfig(ignore_followers=False)
+    r = plan(problem(ego=ego, path=LEFT, v_ref=5.0, obs=obs), cfg)
+    assert not r.collision_free and np.isfinite(r.contact_time).all()
+    assert r.contact_time[r.chosen] > r.contact_time[r.brake_index]
+    assert r.trajectory[-1, 3] > 2.0  # it drives away from the threat
+    rb = plan(problem(ego=ego, path=LEFT, v_ref=5.0, obs=obs), PlannerConfig(ignore_followers=False,
+                                                                           infeasible_fallback="brake"))
     assert rb.chosen == rb.brake_index
-    assert rb.trajectory[-1, 3] == 0.0
-    r = plan(p, PlannerConfig(infeasible_fallback="min_cost"))
-    assert not r.collision_free
-    assert r.chosen == int(np.argmin(r.total)) or r.total[r.chosen] <= r.total.min() + 1e-3
 
 
 def test_obstacle_ahead_makes_keep_costlier_than_change_left():
