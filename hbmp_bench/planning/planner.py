@@ -69,10 +69,10 @@ feasible sample is chosen (ties within ``tie_tolerance`` go to the sample neares
 nominal one), among those that stay on the road where any does (the problem's ``corridor``, an
 addition to the paper: its costs have no road edge, and with a car alongside, re-planning at 10 Hz
 chose the sample that swerved away first again and again, a ratchet that drifted the ego off a
-highway's outer lane, 1.1 m off its centre at 20 m/s); if none is feasible, ``collision_free`` is False and the chosen sample is the one whose first predicted contact
-comes latest, the slowest at that contact among ties (``infeasible_fallback="latest_contact"``, default: the
-full brake before a pedestrian stopped ahead, moving on before a car closing from behind), the full brake
-(``"brake"``) or the cheapest one (``"min_cost"``). ``min_cost`` kept 3-5 m/s into pedestrians stopped on a
+highway's outer lane, 1.1 m off its centre at 20 m/s). If none is feasible, ``collision_free`` is False and
+the chosen sample is the one whose first predicted contact comes latest, the slowest at that contact among
+ties (``infeasible_fallback="latest_contact"``, default: the full brake before a pedestrian stopped ahead,
+moving on before a car closing from behind), the full brake (``"brake"``) or the cheapest one (``"min_cost"``). ``min_cost`` kept 3-5 m/s into pedestrians stopped on a
 crossing; ``brake`` stopped a slow lane change in front of the car it was leaving behind, which ran into it
 (``docs/experiments/planner-brake-fallback/``). The full brake index is always reported in
 :attr:`PlanResult.brake_index`.
@@ -528,9 +528,9 @@ def _first_contacts(X, Y, PSI, obs: Obstacles, times, cfg: PlannerConfig) -> np.
     if len(obs) == 0:
         return np.full(X.shape[1], X.shape[0], dtype=np.int64)
     return first_contacts(np.ascontiguousarray(X), np.ascontiguousarray(Y), np.ascontiguousarray(PSI),
-                      obs.x, obs.y, obs.yaw, obs.v, obs.length, obs.width,
-                      np.ascontiguousarray(times, dtype=np.float64), 0.5 * cfg.length + cfg.safety_margin,
-                      0.5 * cfg.width + cfg.safety_margin)
+                          obs.x, obs.y, obs.yaw, obs.v, obs.length, obs.width,
+                          np.ascontiguousarray(times, dtype=np.float64), 0.5 * cfg.length + cfg.safety_margin,
+                          0.5 * cfg.width + cfg.safety_margin)
 
 
 def instant_costs(path: Path, ego: VehicleState, obstacles: Obstacles,

@@ -253,13 +253,12 @@ def test_a_threat_from_behind_is_not_met_by_braking():
     ran into the ego. The latest first contact keeps moving and puts the contact off."""
     obs = [car(-7.0, v=5.5)]  # in the lane the ego leaves, 2.4 m between the two
     ego = VehicleState(0.0, 1.5, 0.3, 2.0)  # 1.5 m into the change, 17 degrees towards the left lane
-    cfg = PlannerConfig(ignore_followers=False)
-    r = plan(problem(ego=ego, path=LEFT, v_ref=5.0, obs=obs), cfg)
+    p = problem(ego=ego, path=LEFT, v_ref=5.0, obs=obs)
+    r = plan(p, PlannerConfig(ignore_followers=False))
     assert not r.collision_free and np.isfinite(r.contact_time).all()
     assert r.contact_time[r.chosen] > r.contact_time[r.brake_index]
     assert r.trajectory[-1, 3] > 2.0  # it drives away from the threat
-    rb = plan(problem(ego=ego, path=LEFT, v_ref=5.0, obs=obs), PlannerConfig(ignore_followers=False,
-                                                                           infeasible_fallback="brake"))
+    rb = plan(p, PlannerConfig(ignore_followers=False, infeasible_fallback="brake"))
     assert rb.chosen == rb.brake_index
 
 
