@@ -72,8 +72,9 @@ chose the sample that swerved away first again and again, a ratchet that drifted
 highway's outer lane, 1.1 m off its centre at 20 m/s). If none is feasible, ``collision_free`` is False and
 the chosen sample is the one whose first predicted contact comes latest, the slowest at that contact among
 ties (``infeasible_fallback="latest_contact"``, default: the full brake before a pedestrian stopped ahead,
-moving on before a car closing from behind), the full brake (``"brake"``) or the cheapest one (``"min_cost"``). ``min_cost`` kept 3-5 m/s into pedestrians stopped on a
-crossing; ``brake`` stopped a slow lane change in front of the car it was leaving behind, which ran into it
+moving on before a car closing from behind), the full brake (``"brake"``) or the cheapest one
+(``"min_cost"``). ``min_cost`` kept 3-5 m/s into pedestrians stopped on a crossing; ``brake`` stopped a slow
+lane change in front of the car it was leaving behind, which ran into it
 (``docs/experiments/planner-brake-fallback/``). The full brake index is always reported in
 :attr:`PlanResult.brake_index`.
 """
