@@ -69,9 +69,11 @@ feasible sample is chosen (ties within ``tie_tolerance`` go to the sample neares
 nominal one), among those that stay on the road where any does (the problem's ``corridor``, an
 addition to the paper: its costs have no road edge, and with a car alongside, re-planning at 10 Hz
 chose the sample that swerved away first again and again, a ratchet that drifted the ego off a
-highway's outer lane, 1.1 m off its centre at 20 m/s). If none is feasible, ``collision_free`` is False and
-the chosen sample is the one whose first predicted contact comes latest, the slowest at that contact among
-ties (``infeasible_fallback="latest_contact"``, default: the full brake before a pedestrian stopped ahead,
+highway's outer lane, 1.1 m off its centre at 20 m/s; a sample may stray as far as the control law
+does at its speed, see :func:`on_road`). If none is feasible, ``collision_free`` is False and
+the chosen sample is the one whose first predicted contact comes latest; among ties the slowest at that
+contact where what it meets lies ahead of the ego's centre, else the cheapest (:func:`met_ahead`;
+``infeasible_fallback="latest_contact"``, default: the full brake before a pedestrian stopped ahead,
 moving on before a car closing from behind), the full brake (``"brake"``) or the cheapest one
 (``"min_cost"``). ``min_cost`` kept 3-5 m/s into pedestrians stopped on a crossing; ``brake`` stopped a slow
 lane change in front of the car it was leaving behind, which ran into it
@@ -151,7 +153,8 @@ class PlannerConfig:
             (e.g. no obstacles: the paper's costs do not depend on ``omega``) would pick an
             arbitrary swerving sample.
         infeasible_fallback: the choice when nothing is collision-free: ``"latest_contact"`` (the sample
-            whose first predicted contact comes latest; ties to the slowest at that contact), ``"brake"``
+            whose first predicted contact comes latest; ties to the slowest at that contact when it is met
+            ahead of the ego's centre, else to the cheapest), ``"brake"``
             (the full brake) or ``"min_cost"`` (the cheapest sample).
         curve_lat_accel: lateral acceleration the speed profile allows in curves [m/s^2]
             (``inf`` disables the curve speed cap, see :func:`curve_speed_cap`).
@@ -359,6 +362,17 @@ class _Layout(NamedTuple):
     t2_sum: float  # sum of t2 [s^2]
     params: np.ndarray  # (24,) the scalars :func:`.plan_kernel.plan_samples` reads (:func:`kernel_params`)
     hold: int  # steps the omega(0) offset is held
+    lane_following: np.ndarray  # (S,) each sample's lane-following sample: its speed row's omega offset 0
+
+
+def _lane_following(cfg: PlannerConfig) -> np.ndarray:
+    """(S,) for each sample the index of the sample with its ``v(0)`` whose ``omega(0)`` offset is the
+    smallest (0 for an odd ``n_omega``): the plain lane-converging control law at that speed. The two
+    braking samples follow the control law themselves."""
+    dw = _spread(-cfg.omega_spread, cfg.omega_spread, cfg.n_omega)
+    rows = np.repeat(np.arange(cfg.n_v), cfg.n_omega) * cfg.n_omega + int(np.argmin(np.abs(dw)))
+    n_grid = cfg.n_v * cfg.n_omega
+    return np.concatenate([rows, [n_grid, n_grid + 1]])
 
 
 @functools.lru_cache(maxsize=16)
@@ -374,6 +388,7 @@ def _layout(cfg: PlannerConfig) -> _Layout:
         t2_sum=float((times[1:] ** 2).sum()),
         params=kernel_params(cfg),
         hold=max(1, round(cfg.omega_hold / cfg.dt)),
+        lane_following=_lane_following(cfg),
     )
     for a in layout:
         if isinstance(a, np.ndarray):
@@ -602,48 +617,83 @@ def plan(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResu
     c_vel = (np.abs(v_ref - Vf) @ layout.t2) / layout.t2_sum
     c_dist = 1.0 / (1.0 + np.abs(Vf).sum(axis=1))
     return _choose(cfg, layout.times, traj, omega, frenet, c_vel, c_dist, c_obs, first, dev, v_ref,
-                   on_road(frenet, problem.corridor))
+                   on_road(frenet, problem.corridor, layout.lane_following), obs)
 
 
-def on_road(frenet: np.ndarray, corridor: tuple[float, float, float]) -> np.ndarray:
+def on_road(frenet: np.ndarray, corridor: tuple[float, float, float],
+            lane_following: np.ndarray | None = None) -> np.ndarray:
     """(S,) which samples keep their centre within ``corridor`` = ``(e_right, e_left, s_end)`` (see
     :class:`PlanningProblem`) at every future point with ``s <= s_end``, or no further out than the ego
-    is now; ``frenet``: (S, T, 2) ``[s, e]`` [m], point 0 the current pose."""
+    is now, or than ``lane_following`` (S,) allows: each sample may stray as far out as the sample of
+    that index does (:func:`_lane_following`: the control law at its speed, whose own swing is no
+    choice of the planner's; a car standing 0.86 m left of a 0.85 m corridor, heading out, swings 0.15 m
+    further before the law turns it, and without the allowance only the stop samples stayed on the
+    road: it stood 41 s asking to go). ``frenet``: (S, T, 2) ``[s, e]`` [m], point 0 the current pose."""
     e_right, e_left, s_end = corridor
     if e_right == -np.inf and e_left == np.inf:
         return np.ones(len(frenet), dtype=bool)
     e_now = float(frenet[0, 0, 1])
     s, e = frenet[:, 1:, 0], frenet[:, 1:, 1]
-    out = (s <= s_end) & ((e < min(e_right, e_now)) | (e > max(e_left, e_now)))
-    return ~out.any(axis=1)
+    out = np.maximum(e - max(e_left, e_now), min(e_right, e_now) - e)  # (S, T - 1) [m], > 0 off the road
+    excursion = np.where(s <= s_end, np.maximum(out, 0.0), 0.0).max(axis=1, initial=0.0)
+    allowed = 0.0 if lane_following is None else excursion[lane_following]
+    return excursion <= allowed
 
 
 def _choose(cfg: PlannerConfig, times, trajectories, omega, frenet, c_vel, c_dist, c_obs, first, dev,
-            v_ref, road) -> PlanResult:
+            v_ref, road, obstacles: Obstacles) -> PlanResult:
     """The cheapest feasible sample, on the road where one is (ties to the nearest the nominal one), else
     the ``infeasible_fallback``'s (see the module docstring). ``first``: (S,) each sample's first contact
-    step, an index into ``times[1:]`` (``len(times) - 1``: none)."""
+    step, an index into ``times[1:]`` (``len(times) - 1``: none); ``obstacles``: the problem's."""
     total = cfg.w_velocity * c_vel + cfg.w_dist * c_dist + cfg.w_obs * c_obs
     brake_index = len(total) - 1
     n = len(times) - 1
     feasible = first >= n
     contact_time = np.where(feasible, np.inf, times[1:][np.minimum(first, n - 1)])
     any_feasible = feasible.any()
-    if any_feasible or cfg.infeasible_fallback == "min_cost":
-        preferred = feasible & road if (feasible & road).any() else feasible
-        cand = np.where(preferred, total, np.inf) if any_feasible else total
-        tied = cand <= cand.min() + cfg.tie_tolerance
-        chosen = int(np.argmin(np.where(tied, dev, np.inf)))
+    if any_feasible:
+        chosen = _cheapest(total, feasible & road if (feasible & road).any() else feasible, dev, cfg.tie_tolerance)
+    elif cfg.infeasible_fallback == "min_cost":
+        chosen = _cheapest(total, np.ones_like(feasible), dev, cfg.tie_tolerance)
     elif cfg.infeasible_fallback == "brake":
         chosen = brake_index
-    else:  # latest_contact: the latest first contact, the slowest there among ties
-        impact_speed = np.abs(trajectories[np.arange(len(first)), first + 1, 3])
-        latest = first == first.max()
+    else:  # latest_contact: the latest first contact; among ties the slowest there if it is met ahead
+        step = int(first.max())
+        latest = first == step
+        impact_speed = np.abs(trajectories[:, step + 1, 3])
         chosen = int(np.argmin(np.where(latest, impact_speed, np.inf)))
+        if not met_ahead(trajectories[chosen, step + 1], float(times[step + 1]), obstacles, cfg):
+            chosen = _cheapest(total, latest, dev, cfg.tie_tolerance)
     return PlanResult(times=times, trajectories=trajectories, omega=omega, frenet=frenet,
                       costs=np.stack([c_vel, c_dist, c_obs], axis=1), total=total, feasible=feasible,
                       contact_time=contact_time, on_road=road, chosen=chosen,
                       collision_free=bool(feasible[chosen]), brake_index=brake_index, v_ref=float(v_ref))
+
+
+def _cheapest(total: np.ndarray, among: np.ndarray, dev: np.ndarray, tolerance: float) -> int:
+    """The index of the cheapest sample ``among`` (S,) mask; samples within ``tolerance`` of its ``total``
+    count as tied, and the one of smallest ``dev`` (distance from the nominal sample) among them wins."""
+    cand = np.where(among, total, np.inf)
+    tied = cand <= cand.min() + tolerance
+    return int(np.argmin(np.where(tied, dev, np.inf)))
+
+
+def met_ahead(pose: np.ndarray, t: float, obstacles: Obstacles, cfg: PlannerConfig) -> bool:
+    """Whether an obstacle that touches the ego's footprint (inflated by ``safety_margin``) at ``pose`` =
+    ``[x, y, yaw, v]`` at time ``t`` [s] (obstacles predicted as the collision check predicts them) has
+    its centre ahead of the ego's centre along its heading: a contact that braking puts off or softens.
+    One from behind or beside-behind is not: braking in front of it brings it on (a slow lane change
+    braked to a stop before the car it left behind was run into), so the fallback then takes the
+    cheapest of the samples tied at the latest contact (``docs/experiments/planner-brake-fallback/``)."""
+    if len(obstacles) == 0:
+        return False
+    ox, oy = obstacles.predict(np.array([t]))
+    dx, dy = ox[:, 0] - pose[0], oy[:, 0] - pose[1]
+    ce, se = math.cos(pose[2]), math.sin(pose[2])
+    touches = _sat_overlap(dx, dy, ce, se, 0.5 * cfg.length + cfg.safety_margin, 0.5 * cfg.width + cfg.safety_margin,
+                           np.cos(obstacles.yaw), np.sin(obstacles.yaw), 0.5 * obstacles.length,
+                           0.5 * obstacles.width)
+    return bool((touches & (dx * ce + dy * se > 0.0)).any())
 
 
 def plan_reference(problem: PlanningProblem, cfg: PlannerConfig | None = None) -> PlanResult:
@@ -707,7 +757,8 @@ def plan_reference(problem: PlanningProblem, cfg: PlannerConfig | None = None) -
     first = _first_contacts(X[1:], Y[1:], PSI[1:], collision_checked(obs, lp, s0, e0, cfg), future, cfg)
     frenet = np.stack([SS.T, EE.T], axis=2)
     return _choose(cfg, times, np.stack([X.T, Y.T, PSI.T, V], axis=2), np.ascontiguousarray(W.T),
-                   frenet, c_vel, c_dist, c_obs, first, dev, v_ref, on_road(frenet, problem.corridor))
+                   frenet, c_vel, c_dist, c_obs, first, dev, v_ref, on_road(frenet, problem.corridor,
+                                                                            layout.lane_following), obs)
 
 
 def compile_kernels(cfg: PlannerConfig | None = None) -> None:

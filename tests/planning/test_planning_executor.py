@@ -324,3 +324,33 @@ def test_on_road_bounds_only_the_lane_and_never_what_the_ego_already_is():
                      [-1.0, -1.0, -1.0, -1.0],   # holding,
                      [-1.0, -1.2, -1.3, -1.3]])  # or going further out
     assert on_road(np.stack([s, back], axis=2), (-0.8, np.inf, np.inf)).tolist() == [True, True, False]
+
+
+def test_the_control_laws_own_swing_does_not_leave_the_road():
+    """Recorded in ``hbmp-s``'s Town02 episode 13 of ``nocrash-regular``: the ego stood 0.86 m left of its
+    lane's centre, beyond the 0.85 m corridor, heading out. From a standstill every moving sample swings
+    further out before the control law turns it back, so only the two stop samples stayed on the road and it
+    stood 41 s asking to go. Each sample may stray as far as its speed's lane-following sample."""
+    from hbmp_bench.planning.planner import PlanningProblem, on_road, plan
+
+    corridor = (-0.85, 0.85, 1000.0)
+    p = PlanningProblem(VehicleState(0.0, 0.86, 0.2, 0.0), lane(0.0), 2.0, 10.0, corridor=corridor)
+    r = plan(p)
+    assert on_road(r.frenet, corridor).sum() == 2  # without the allowance: the stop samples alone
+    assert r.on_road.sum() > 2 and r.on_road[r.chosen] and r.collision_free
+    assert r.trajectory[10, 3] > 1.0  # it moves off
+    # samples that swerve further out than the law does stay off the road
+    assert not r.on_road[np.argmax(r.frenet[:, 1:, 1].max(axis=1))]
+
+
+def test_on_road_allows_each_sample_its_lane_following_samples_excursion():
+    from hbmp_bench.planning.planner import on_road
+
+    s = np.tile(np.linspace(0.0, 30.0, 4), (3, 1))
+    e = np.array([[0.9, 1.0, 0.9, 0.5],    # the law's own swing, 0.1 m past where the ego is
+                  [0.9, 1.1, 1.0, 0.6],    # further out than the law
+                  [0.9, 0.9, 0.8, 0.4]])   # never further out than the ego
+    frenet = np.stack([s, e], axis=2)
+    corridor = (-0.8, 0.8, np.inf)
+    assert on_road(frenet, corridor).tolist() == [False, False, True]
+    assert on_road(frenet, corridor, np.array([0, 0, 0])).tolist() == [True, False, True]

@@ -262,6 +262,38 @@ def test_a_threat_from_behind_is_not_met_by_braking():
     assert rb.chosen == rb.brake_index
 
 
+@pytest.mark.parametrize("x_obstacle, met_ahead", [(3.0, True), (-3.0, False)])
+def test_a_contact_every_sample_shares_is_braked_for_only_when_it_is_ahead(x_obstacle, met_ahead):
+    """A car in the lane to the left already touches the ego's inflated footprint, so every sample meets it
+    at the first step. Ahead of the ego's centre, braking softens the contact: the slowest sample. Behind
+    it, braking would stop the ego in the car's way: the cheapest of the tied samples."""
+    p = problem(ego=VehicleState(0.0, 0.0, 0.0, 3.0), v_ref=5.0, obs=[car(x_obstacle, y=2.0, v=3.0)])
+    r = plan(p)
+    assert not r.feasible.any() and (r.contact_time == r.times[1]).all()
+    impact_speed = r.trajectories[:, 1, 3]
+    if met_ahead:
+        assert impact_speed[r.chosen] == impact_speed.min()
+    else:
+        assert r.total[r.chosen] <= r.total.min() + PlannerConfig().tie_tolerance
+        assert r.trajectory[-1, 3] > 3.0  # it drives on towards v_ref
+
+
+def test_met_ahead_reads_the_touching_obstacles_centre_along_the_heading():
+    from hbmp_bench.planning.planner import met_ahead
+
+    cfg = PlannerConfig()
+    pose = np.array([0.0, 0.0, np.pi / 2, 5.0])  # heading +y
+    touching_ahead = obstacles(car(1.0, y=3.0, yaw=np.pi / 2))
+    assert met_ahead(pose, 0.0, touching_ahead, cfg)
+    assert not met_ahead(pose, 0.0, obstacles(car(1.0, y=-3.0, yaw=np.pi / 2)), cfg)  # behind
+    assert not met_ahead(pose, 0.0, obstacles(car(0.0, y=20.0)), cfg)  # ahead but far: no contact
+    assert not met_ahead(pose, 0.0, Obstacles.empty(), cfg)
+    # predicted as the collision check predicts: 10 m behind at 10 m/s closing, touching 0.6 s on
+    behind_closing = obstacles(car(0.0, y=-10.0, yaw=np.pi / 2, v=10.0))
+    assert not met_ahead(pose, 0.6, behind_closing, cfg)
+    assert met_ahead(pose, 1.2, behind_closing, cfg)  # 2 m past the ego's centre by then
+
+
 def test_obstacle_ahead_makes_keep_costlier_than_change_left():
     obs = [car(25.0, v=5.0)]  # slower car 25 m ahead in the current lane
     costs = {name: plan(problem(path=p, obs=obs)).c_total
