@@ -252,8 +252,9 @@ class PlanningProblem:
         corridor: the road beside the path, ``(e_right, e_left, s_end)``: the lateral offsets [m]
             (right negative) the footprint centre may take up to arc length ``s_end`` [m] of
             ``path`` (the end of the ego's lane) without leaving the road. Samples that stray further
-            (or further than the ego already is) are chosen only when no collision-free sample
-            stays inside (:attr:`PlanResult.on_road`). Default: no bounds.
+            (than the ego already is, and than the control law at their speed does: :func:`on_road`) are
+            chosen only when no collision-free sample stays inside (:attr:`PlanResult.on_road`). Default: no
+            bounds.
     """
 
     ego: VehicleState
