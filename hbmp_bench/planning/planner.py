@@ -366,13 +366,13 @@ class _Layout(NamedTuple):
     lane_following: np.ndarray  # (S,) each sample's lane-following sample: its speed row's omega offset 0
 
 
-def _lane_following(cfg: PlannerConfig) -> np.ndarray:
-    """(S,) for each sample the index of the sample with its ``v(0)`` whose ``omega(0)`` offset is the
-    smallest (0 for an odd ``n_omega``): the plain lane-converging control law at that speed. The two
-    braking samples follow the control law themselves."""
-    dw = _spread(-cfg.omega_spread, cfg.omega_spread, cfg.n_omega)
-    rows = np.repeat(np.arange(cfg.n_v), cfg.n_omega) * cfg.n_omega + int(np.argmin(np.abs(dw)))
-    n_grid = cfg.n_v * cfg.n_omega
+def _lane_following(n_v: int, dw: np.ndarray) -> np.ndarray:
+    """(S,) for each sample the index of the sample with its ``v(0)`` whose ``omega(0)`` offset (``dw``,
+    (n_omega,)) is the smallest (0 for an odd ``n_omega``): the plain lane-converging control law at that
+    speed. The two braking samples follow the control law themselves."""
+    n_omega = len(dw)
+    n_grid = n_v * n_omega
+    rows = np.repeat(np.arange(n_v), n_omega) * n_omega + int(np.argmin(np.abs(dw)))
     return np.concatenate([rows, [n_grid, n_grid + 1]])
 
 
@@ -380,16 +380,17 @@ def _lane_following(cfg: PlannerConfig) -> np.ndarray:
 def _layout(cfg: PlannerConfig) -> _Layout:
     n_grid = cfg.n_v * cfg.n_omega
     times = np.arange(cfg.n_steps + 1) * cfg.dt
+    dw = _spread(-cfg.omega_spread, cfg.omega_spread, cfg.n_omega)
     layout = _Layout(
         times=times,
         dv=_spread(-cfg.decel * cfg.v_window_time, cfg.accel * cfg.v_window_time, cfg.n_v),
-        dw=_spread(-cfg.omega_spread, cfg.omega_spread, cfg.n_omega),
+        dw=dw,
         dec=np.concatenate([np.full(n_grid, cfg.decel), [cfg.decel, cfg.brake_decel]]),
         t2=times[1:] ** 2,
         t2_sum=float((times[1:] ** 2).sum()),
         params=kernel_params(cfg),
         hold=max(1, round(cfg.omega_hold / cfg.dt)),
-        lane_following=_lane_following(cfg),
+        lane_following=_lane_following(cfg.n_v, dw),
     )
     for a in layout:
         if isinstance(a, np.ndarray):
@@ -636,7 +637,7 @@ def on_road(frenet: np.ndarray, corridor: tuple[float, float, float],
     e_now = float(frenet[0, 0, 1])
     s, e = frenet[:, 1:, 0], frenet[:, 1:, 1]
     out = np.maximum(e - max(e_left, e_now), min(e_right, e_now) - e)  # (S, T - 1) [m], > 0 off the road
-    excursion = np.where(s <= s_end, np.maximum(out, 0.0), 0.0).max(axis=1, initial=0.0)
+    excursion = np.where(s <= s_end, out, 0.0).max(axis=1, initial=0.0)  # (S,) [m], 0 where it stays on
     allowed = 0.0 if lane_following is None else excursion[lane_following]
     return excursion <= allowed
 

@@ -7,12 +7,13 @@ tied samples only for a contact met ahead of the ego's centre, else takes the ch
 the single-ego Town01 and Town02 cases end 1.4-1.5 s sooner, a 3-vehicle Town01 case drives 11 m further
 before its step cap, and the 4-vehicle Town02 case stops 4.7 m short of its goal at the cap; before it the
 planner's fallback when no sample is collision-free is the sample whose first contact comes latest,
-``PlannerConfig.infeasible_fallback="latest_contact"``, not the cheapest: the single-ego Town01 case ends 0.1 s later and 0.75 m shorter, a 3-vehicle Town01 case 2 m
-shorter, and the 4-vehicle Town02 case reaches its goal before the step cap (0.918 of the route before); before it
-the planner leaves the ego's followers out of its collision check, ``PlannerConfig.ignore_followers``: the
-4-vehicle Town02 case drives 8 decisions further, 0.918 of its route instead of 0.857, before its step cap;
-before it λ's scale 0.25, rewards only; before it the towns' smoother junction lanes and 2 m crossings, episode
-rules 11: route lengths moved by ~0.1 m and a multi-agent case by a few decisions)."""
+``PlannerConfig.infeasible_fallback="latest_contact"``, not the cheapest: the single-ego Town01 case ends 0.1 s
+later and 0.75 m shorter, a 3-vehicle Town01 case 2 m shorter, and the 4-vehicle Town02 case reaches its goal
+before the step cap (0.918 of the route before); before it the planner leaves the ego's followers out of its
+collision check, ``PlannerConfig.ignore_followers``: the 4-vehicle Town02 case drives 8 decisions further, 0.918
+of its route instead of 0.857, before its step cap; before it λ's scale 0.25, rewards only; before it the towns'
+smoother junction lanes and 2 m crossings, episode rules 11: route lengths moved by ~0.1 m and a multi-agent
+case by a few decisions)."""
 
 import json
 
