@@ -31,7 +31,7 @@ TRAIN_COMMANDS = {
           "--density regular --out runs/il",
     "hbmp": "hbmp-bench train hbmp --episodes 6000 --workers 2 --seed 0 --density regular --out runs/hbmp",
     "hbmp-s": "hbmp-bench train hbmp-s --episodes 6000 --workers 2 --seed 0 --density regular --out runs/hbmp-s",
-    "flat": "hbmp-bench train flat --episodes 6000 --workers 2 --seed 0 --density regular --out runs/flat",
+    "flat": "hbmp-bench train flat --episodes 1000 --workers 2 --seed 0 --density regular --out runs/flat",
 }
 """How each shipped checkpoint is (re)produced; the model card beside it has the exact command used."""
 
