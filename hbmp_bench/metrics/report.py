@@ -13,7 +13,7 @@ Views (``build_report``):
                    the columns are (town, set).
     failures       per (set, town) the number of *episodes* with each outcome: success, wrong lane
                    (opposite lane or off-road: the paper's "out of lanes"), collision, red light,
-                   timeout, and agent errors. An episode with a collision and a red light counts
+                   timeout, left the network, and agent errors. An episode with a collision and a red light counts
                    in both; under CoRL2017 rules a successful episode can also have infractions.
     driving        CARLA Leaderboard driving score and route completion (means over episodes, %),
                    per (set, town) and over all towns.
@@ -50,8 +50,11 @@ from hbmp_bench.metrics.records import (
 )
 from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS
 
-OUTCOMES = ("success", "wrong_lane", "collision", "red_light", "timeout", "agent_error")
-"""Columns of the failure-count view, in the paper's figure order (agent errors appended)."""
+OUTCOMES = ("success", "wrong_lane", "collision", "red_light", "timeout", "left_network", "agent_error")
+"""Columns of the failure-count view, in the paper's figure order, then the two ends the paper's figure
+has no bar for: ``left_network`` (the ego left the road network, e.g. drove past its goal a lane off)
+and agent errors. Under episode rules that end at the first violation, each scored episode has
+exactly one of these outcomes."""
 
 INFRACTIONS = ("collision", "collision_vehicle", "collision_pedestrian", "wrong_lane", "off_road", "red_light")
 """Event kinds of the km-between-infractions view (``collision`` = all collisions)."""
@@ -205,6 +208,7 @@ def failure_counts(df: pd.DataFrame) -> pd.DataFrame:
                                    + part["collision_other"]) > 0).sum()),
                 "red_light": int((part["red_light"] > 0).sum()),
                 "timeout": int(part["timeout"].astype(bool).sum()),
+                "left_network": int((part["end_reason"] == "left_network").sum()),
                 "agent_error": int((part["end_reason"] == AGENT_ERROR).sum()),
                 "sim_errors": int((everything["end_reason"] == SIM_ERROR).sum()),
             })

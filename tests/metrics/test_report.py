@@ -68,7 +68,7 @@ def test_failure_counts_count_episodes_per_outcome(two_sets):
     counts = failure_counts(two_sets)
     a1 = counts.loc[("a", "Town01")]
     assert a1.to_dict() == {"episodes": 3, "success": 2, "wrong_lane": 1, "collision": 1, "red_light": 1,
-                            "timeout": 1, "agent_error": 0, "sim_errors": 0}
+                            "timeout": 1, "left_network": 0, "agent_error": 0, "sim_errors": 0}
     assert counts.loc[("a", "Town02"), "agent_error"] == 1 and counts.loc[("a", "Town02"), "episodes"] == 2
     assert counts.loc[("a", "Town02"), "sim_errors"] == 1  # not scored, but shown
     assert list(counts.index) == [("a", "Town01"), ("a", "Town02"), ("b", "Town01"), ("b", "Town02")]
@@ -213,3 +213,25 @@ def test_paired_view_counts_the_episodes_both_sets_scored_and_tests_where_they_d
     shared = build_report(two_sets)["paired"].loc[("a", "b")].to_dict()
     assert (shared["episodes"], shared["both_success"], shared["neither"], shared["p_mcnemar"]) == (3, 2, 1, 1.0)
     assert paired_comparison(records_frame(first)).empty  # one set: nothing to pair
+
+
+def test_an_episode_that_left_the_network_has_its_own_outcome():
+    counts = failure_counts(records_frame([
+        rec(episode=0),
+        failed(episode=1, end_reason="left_network", timeout=False, route_completion=1.0),
+    ]))
+    row = counts.loc[("a", "Town01")]
+    assert (row["success"], row["left_network"], row["timeout"]) == (1, 1, 0)
+
+
+def test_every_paper_protocol_episode_on_the_committed_board_has_exactly_one_outcome():
+    """An auditor's check on the shipped `hbmp` board: episodes end at the first violation, so the
+    outcomes of every (agent, town) row add up to its episodes."""
+    from pathlib import Path
+
+    board = Path(__file__).resolve().parents[2] / "leaderboards" / "hbmp"
+    counts = failure_counts(load_results(sorted(board.glob("*.json"))))
+    outcomes = ["success", "wrong_lane", "collision", "red_light", "timeout", "left_network", "agent_error"]
+    assert len(counts) >= 25
+    mismatched = counts[counts[outcomes].sum(axis=1) != counts["episodes"]]
+    assert mismatched.empty, mismatched
