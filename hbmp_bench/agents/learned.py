@@ -54,6 +54,12 @@ def shipped_checkpoint(name: str) -> str:
     return path
 
 
+def checkpoint_fingerprint(path: str | os.PathLike) -> str:
+    """sha256 of a checkpoint file's bytes (first 16 hex digits): which weights drove an evaluation."""
+    with open(path, "rb") as f:
+        return hashlib.sha256(f.read()).hexdigest()[:16]
+
+
 class LearnedAgent:
     """A trained policy from a checkpoint file.
 
@@ -67,8 +73,8 @@ class LearnedAgent:
         env_kwargs: the observation options the policy needs from the env (``observation``), to
             pass to ``make``; empty for the default deformed M_t.
         trained_env: every environment option of its training run (id, fidelity, density ...).
-        fingerprint: sha256 of the checkpoint file (first 16 hex digits): which weights drove an
-            evaluation, so a resumed one never mixes two checkpoints under one name.
+        fingerprint: :func:`checkpoint_fingerprint` of the file, so a resumed evaluation never mixes
+            two checkpoints under one name and a leaderboard entry names the weights it measured.
     """
 
     def __init__(self, checkpoint: str, name: str | None = None, device: str = "cpu"):
@@ -78,8 +84,7 @@ class LearnedAgent:
 
         ckpt = load_checkpoint(checkpoint)
         self.checkpoint = checkpoint
-        with open(checkpoint, "rb") as f:
-            self.fingerprint = hashlib.sha256(f.read()).hexdigest()[:16]
+        self.fingerprint = checkpoint_fingerprint(checkpoint)
         self.kind = ckpt["kind"]
         self.name = name or self.kind
         model = ckpt["model"]

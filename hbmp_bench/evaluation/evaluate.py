@@ -50,6 +50,8 @@ class EvaluationResult:
         missing: selected episodes with no record (the run was interrupted).
         privileged: the env gave the agent the privileged scene fields (it asked for them, or
             the evaluator's limits set them): its scores are not comparable with a learned agent's.
+        agent_fingerprint: the agent's weights as its description names them (a learned agent's
+            ``checkpoint_fingerprint``; "" for an agent without a checkpoint).
     """
 
     path: Path
@@ -59,6 +61,7 @@ class EvaluationResult:
     wall_s: float
     missing: int
     privileged: bool = False
+    agent_fingerprint: str = ""
 
     @property
     def sim_errors(self) -> int:
@@ -204,7 +207,8 @@ def evaluate(
     wanted = {t.key: k for k, t in enumerate(selection)}
     records = sorted((r for r in latest_per_key(records) if r.key in wanted), key=lambda r: wanted[r.key])
     return EvaluationResult(path, tuple(records), ran, len(selection) - len(todo), time.perf_counter() - start,
-                            len(selection) - len(records), privileged=is_privileged(limits))
+                            len(selection) - len(records), privileged=is_privileged(limits),
+                            agent_fingerprint=fingerprint)
 
 
 @functools.cache  # the package does not change under a running process

@@ -2,8 +2,9 @@
 
 A submission evaluates an agent on a suite (resumable, see ``evaluate``) and writes a results
 file with the per-episode records, the aggregate scores and provenance (package and library
-versions, git commit, suite definition hash, seeds, date, machine, fidelity, wall time). The
-suite's ``README.md`` is then regenerated: a ranked table per fidelity.
+versions, git commit, the fingerprints of the code that ran and of the agent's weights, suite
+definition hash, seeds, date, machine, fidelity, wall time). The suite's ``README.md`` is then
+regenerated: a ranked table per fidelity.
 
 Rules:
 - Only *complete* entries are ranked: every episode of the official suite (all towns, tasks and
@@ -37,7 +38,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from hbmp_bench import __version__
-from hbmp_bench.evaluation.evaluate import evaluate
+from hbmp_bench.evaluation.evaluate import code_fingerprint, evaluate
 from hbmp_bench.evaluation.integrity import BoardSnapshot
 from hbmp_bench.evaluation.provenance import git_commit, library_versions, machine_description, utc_now
 from hbmp_bench.evaluation.tasks import RunnerLimits, agent_slug, suite_tasks
@@ -72,8 +73,6 @@ def runs_dir(board_dir: str | os.PathLike, suite: str) -> Path:
     """Where submissions keep their raw JSON-lines records (ignored by git; resumable):
     ``<board>/<suite>/runs/<suite hash>-<code fingerprint>``, so records of an older suite
     definition or another version of the package never mix in (see ``evaluate.check_provenance``)."""
-    from hbmp_bench.evaluation.evaluate import code_fingerprint
-
     return Path(board_dir) / suite / "runs" / f"{get_suite(suite).definition_hash()}-{code_fingerprint()}"
 
 
@@ -90,9 +89,16 @@ def results_document(
     workers: int | None = None,
     backend: str = "process",
     privileged: bool = False,
+    agent_fingerprint: str = "",
 ) -> dict:
     """The results file content for ``records`` of a selection of ``suite``; ``privileged``: the
-    agent read the privileged scene fields (``EvaluationResult.privileged``)."""
+    agent read the privileged scene fields (``EvaluationResult.privileged``); ``agent_fingerprint``:
+    its weights (``EvaluationResult.agent_fingerprint``).
+
+    A git commit alone does not say what ran (the tree may have been edited), so the provenance
+    also keeps ``code_fingerprint`` (``evaluate.code_fingerprint``: the package's code and nets as
+    they were run) and ``agent_fingerprint``: which checkpoint an entry measured can be checked
+    against the one that ships (``checkpoint_fingerprint``)."""
     spec = get_suite(suite)
     full = (set(towns) == set(spec.towns) and set(tasks) == set(spec.tasks)
             and list(episodes) == list(range(spec.episodes_per_task)))
@@ -128,6 +134,8 @@ def results_document(
         "provenance": {
             "package_version": __version__,
             "git_commit": git_commit(),
+            "code_fingerprint": code_fingerprint(),
+            "agent_fingerprint": agent_fingerprint,
             "suite_definition_hash": spec.definition_hash(),
             "seeds": {"suite_seed": spec.seed, "reset_seed": "episode index",
                       "episode_seeds": "per episode in 'episodes'"},
@@ -232,7 +240,8 @@ def _row(doc: dict, rank: str) -> list[str]:
         f"{s.get('mean_driving_score', 0.0):.1f}", f"{100.0 * s.get('mean_route_completion', 0.0):.1f}",
         NO_INFRACTION if km is None else f"{km:.2f}", f"{s.get('episodes', 0)} of {_suite_episodes(doc['suite'])}",
         str(doc.get("sim_errors", 0)),
-        prov.get("package_version") or "", (prov.get("git_commit") or "")[:10], (prov.get("date_utc") or "")[:10],
+        prov.get("package_version") or "", (prov.get("git_commit") or "")[:10],
+        (prov.get("agent_fingerprint") or "–")[:10], (prov.get("date_utc") or "")[:10],
         "" if prov.get("wall_time_s") is None else f"{prov['wall_time_s']:.0f}",
     ]
 
@@ -241,7 +250,8 @@ NO_INFRACTION = "no infraction"
 """km / infraction of an entry without any infraction event."""
 
 HEADER = ["rank", "agent", "privileged", "success %", *(TASK_LABELS[t] + " %" for t in TASKS), "driving score",
-          "route completion %", "km / infraction", "episodes", "sim errors", "version", "commit", "date", "wall s"]
+          "route completion %", "km / infraction", "episodes", "sim errors", "version", "commit", "weights", "date",
+          "wall s"]
 
 
 def _table(rows: Iterable[list[str]]) -> str:
@@ -265,7 +275,8 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
         f"success % (episodes that reached the goal), then driving score: the mean over episodes of the "
         f"{DRIVING_SCORE_DEFINITION}. km / infraction: km driven per infraction event (collisions, wrong lane, "
         "off-road and red lights; an episode can have several); episodes: scored of the whole suite's; wall s is the "
-        "submission's wall time with its `workers` (see each results file). Agent errors count as failed episodes; sim errors (the simulator failed, not the agent) are not scored, and an "
+        "submission's wall time with its `workers` (see each results file); weights: the first digits of the sha256 of "
+        "the checkpoint a learned agent ran (`provenance.agent_fingerprint`), – for an agent without one. Agent errors count as failed episodes; sim errors (the simulator failed, not the agent) are not scored, and an "
         "entry with any is not ranked. An agent marked privileged read the simulator's privileged scene (light "
         "schedules, junction foes, the leader; the rule-based expert, a reference): not comparable with an agent "
         "that sees M_t and R_t only.\n",
@@ -335,7 +346,7 @@ def submit(
         towns=list(dict.fromkeys(t.town for t in selection)), tasks=list(dict.fromkeys(t.task for t in selection)),
         episodes=sorted({t.episode for t in selection}), fidelity=selection[0].fidelity,
         wall_s=result.wall_s if result.skipped == 0 else None, workers=workers or os.cpu_count(), backend=backend,
-        privileged=result.privileged,
+        privileged=result.privileged, agent_fingerprint=result.agent_fingerprint,
     )
     snapshot.check_unchanged()
     path = write_json(entry_path(board_dir, spec.name, agent, doc["subset"], doc["fidelity"]), doc)

@@ -10,7 +10,9 @@ import shutil
 import pytest
 
 import tiny_suite
+from hbmp_bench.agents.learned import checkpoint_fingerprint, shipped_checkpoint
 from hbmp_bench.cli import main
+from hbmp_bench.evaluation.evaluate import code_fingerprint
 from hbmp_bench.evaluation import RunnerLimits
 from hbmp_bench.evaluation.leaderboard import (
     StaleResultsError,
@@ -50,6 +52,7 @@ def test_complete_entries_carry_provenance_and_are_ranked(board):
     assert prov["fidelity"] == doc["fidelity"] == "event"
     assert prov["seeds"]["suite_seed"] == spec.seed
     assert prov["machine"]["cpu_count"] >= 1 and prov["wall_time_s"] > 0
+    assert prov["code_fingerprint"] == code_fingerprint() and prov["agent_fingerprint"] == ""  # no checkpoint
     assert [e["episode"] for e in doc["episodes"]] == [0, 1] and all(e["seed"] >= 0 for e in doc["episodes"])
     assert doc["summary"]["success_pct"] == 100.0 and doc["summary"]["episodes"] == 2
     assert doc["aggregates"]["success_pct_by_task"] == {"Straight": 100.0}
@@ -64,6 +67,17 @@ def test_complete_entries_carry_provenance_and_are_ranked(board):
     assert rows[0].startswith("| 1 | `expert` | yes | 100.0") and rows[1].startswith("| 2 | `keep` | no | 0.0")
     assert "Partial runs" not in readme
     assert len(list(runs_dir(board, tiny_suite.NAME).glob("*.jsonl"))) == 2  # raw records kept for resuming
+
+
+def test_a_learned_agents_entry_names_the_weights_it_ran(tmp_path):
+    path, doc = submit(tiny_suite.NAME, "il", board_dir=tmp_path, fidelity="event", episodes=1, workers=1,
+                       limits=TINY, progress=False)
+    weights = checkpoint_fingerprint(shipped_checkpoint("il"))
+    assert doc["provenance"]["agent_fingerprint"] == weights and len(weights) == 16
+    assert json.loads(path.read_text())["provenance"]["agent_fingerprint"] == weights
+    row = next(line for line in (tmp_path / tiny_suite.NAME / "README.md").read_text().splitlines()
+               if line.startswith("| – | `il` |"))
+    assert f"| {weights[:10]} |" in row
 
 
 def test_a_resubmission_resumes_from_its_records(board):
