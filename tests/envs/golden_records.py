@@ -2,14 +2,26 @@
 
 Each case runs the expert on one seeded episode and returns its episode record plus a digest of
 every decision (agent, action, reward, R_t bytes, M_t bytes, termination flags), so a change of
-behaviour anywhere in an episode shows, not only in its end. ``python tests/envs/golden_records.py
---write`` regenerates ``golden/records.json`` (each case in its own process); the test compares.
+behaviour anywhere in an episode shows, not only in its end.
+
+The digest hashes floats bit for bit, and bits differ between CPUs: numpy's and the C library's
+transcendental functions round the last bit differently on each instruction set, and a closed loop
+of several planned vehicles can turn one such bit into another decision (the 4-vehicle Town02 case:
+same episode record, another decision stream on a CPU without AVX-512; a 1-ulp perturbation of
+numpy's sin, cos, arctan2, hypot, exp and log changes a background vehicle's 6th decision). So
+``golden/records.json`` keeps each case's record and its digest per platform
+(:func:`platform_label`); the test wants the record and one of the platforms' digests.
+
+``python tests/envs/golden_records.py --write`` regenerates the file on this machine alone (for a
+deliberate change of behaviour; each case runs in its own process); ``--add-platform`` adds this
+machine's digests to the file and refuses unless every case's record is the stored one.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import platform
 import subprocess
 import sys
 from pathlib import Path
@@ -31,6 +43,15 @@ MULTI = [  # (town, task, episode_index, controlled, ego_fidelity, background_fi
     ("Town01", "NavigationDynamic", 0, 2, "event", "continuous", 400),
     ("Town02", "NavigationDynamic", 2, 4, "continuous", "continuous", 300),
 ]
+
+
+def platform_label() -> str:
+    """The machine as far as float rounding goes: its architecture and the highest SIMD level numpy
+    dispatches to (e.g. ``x86_64, numpy SIMD X86_V3``: AVX2 and FMA, no AVX-512)."""
+    from numpy._core._multiarray_umath import __cpu_features__ as features
+
+    levels = sorted((k for k, found in features.items() if found and k.startswith("X86_V")), reverse=True)
+    return f"{platform.machine()}, numpy SIMD {levels[0] if levels else 'baseline'}"
 
 
 def case_names() -> list[str]:
@@ -113,13 +134,25 @@ def run_case(name: str) -> dict:
     return run_multi(town, task, int(index), int(controlled), ef, bf, int(steps))
 
 
+def _run_each_case() -> dict[str, dict]:
+    """Every case, each in a fresh process (a case must not inherit another's simulation)."""
+    out = {}
+    for name in case_names():
+        text = subprocess.run([sys.executable, __file__, name], check=True, capture_output=True, text=True).stdout
+        out[name] = json.loads(text.strip().splitlines()[-1])
+        print(name, out[name]["record"].get("end_reason"), out[name]["digest"][:12], file=sys.stderr)
+    return out
+
+
 def main() -> None:
-    if sys.argv[1:] == ["--write"]:
-        out = {}
-        for name in case_names():
-            text = subprocess.run([sys.executable, __file__, name], check=True, capture_output=True, text=True).stdout
-            out[name] = json.loads(text.strip().splitlines()[-1])
-            print(name, out[name]["record"].get("end_reason"), out[name]["digest"][:12], file=sys.stderr)
+    if sys.argv[1:] in (["--write"], ["--add-platform"]):
+        label, runs = platform_label(), _run_each_case()
+        stored = json.loads(GOLDEN.read_text()) if sys.argv[1] == "--add-platform" else {}
+        changed = sorted(n for n in runs if stored and stored.get(n, {}).get("record") != runs[n]["record"])
+        if changed:
+            sys.exit(f"records differ from the stored ones, so this is no other platform of the same behaviour: {changed}")
+        out = {n: {"record": r["record"], "digests": {**stored.get(n, {}).get("digests", {}), label: r["digest"]}}
+               for n, r in runs.items()}
         GOLDEN.parent.mkdir(exist_ok=True)
         GOLDEN.write_text(json.dumps(out, indent=1, sort_keys=True) + "\n")
         return

@@ -1,5 +1,6 @@
 """The expert's seeded episodes give the records and decision digests stored in ``golden/records.json``
-(written by ``golden_records.py --write``): a refactor keeps behaviour, step for step, in both fidelities,
+(written by ``golden_records.py --write``; a digest per platform, whose float rounding can change a
+multi-vehicle decision stream, see ``golden_records``): a refactor keeps behaviour, step for step, in both fidelities,
 single-ego and multi-agent. They were stored before the envs redesign, which kept them; they are rewritten
 only for a deliberate change of behaviour, named in its commit (last: a planner sample may stray off the road
 as far as the control law at its speed does, ``planner.on_road``, and the latest-contact fallback brakes among
@@ -19,7 +20,7 @@ import json
 
 import pytest
 
-from golden_records import GOLDEN, case_names, run_case
+from golden_records import GOLDEN, case_names, platform_label, run_case
 
 EXPECTED = json.loads(GOLDEN.read_text())
 
@@ -33,4 +34,8 @@ def test_every_case_has_a_golden_entry():
 def test_expert_episode_is_unchanged(name):
     got = run_case(name)
     assert got["record"] == EXPECTED[name]["record"]
-    assert got["digest"] == EXPECTED[name]["digest"]
+    known = EXPECTED[name]["digests"]
+    assert got["digest"] in known.values(), (
+        f"the episode record is the stored one, but the decision stream is no platform's on record "
+        f"({sorted(known)}; this machine: {platform_label()}). A change of behaviour, or float rounding of a "
+        f"platform not yet recorded: if the code did not change, `python tests/envs/golden_records.py --add-platform`")
