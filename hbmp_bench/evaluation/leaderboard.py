@@ -276,7 +276,8 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
         f"{DRIVING_SCORE_DEFINITION}. km / infraction: km driven per infraction event (collisions, wrong lane, "
         "off-road and red lights; an episode can have several); episodes: scored of the whole suite's; wall s is the "
         "submission's wall time with its `workers` (see each results file); weights: the first digits of the sha256 of "
-        "the checkpoint a learned agent ran (`provenance.agent_fingerprint`), – for an agent without one. Agent errors count as failed episodes; sim errors (the simulator failed, not the agent) are not scored, and an "
+        "the checkpoint a learned agent ran (`provenance.agent_fingerprint`), – for an agent without one. Agent errors "
+        "count as failed episodes; sim errors (the simulator failed, not the agent) are not scored, and an "
         "entry with any is not ranked. An agent marked privileged read the simulator's privileged scene (light "
         "schedules, junction foes, the leader; the rule-based expert, a reference): not comparable with an agent "
         "that sees M_t and R_t only.\n",

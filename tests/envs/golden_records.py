@@ -48,7 +48,10 @@ MULTI = [  # (town, task, episode_index, controlled, ego_fidelity, background_fi
 def platform_label() -> str:
     """The machine as far as float rounding goes: its architecture and the highest SIMD level numpy
     dispatches to (e.g. ``x86_64, numpy SIMD X86_V3``: AVX2 and FMA, no AVX-512)."""
-    from numpy._core._multiarray_umath import __cpu_features__ as features
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:  # numpy 1.x
+        from numpy.core._multiarray_umath import __cpu_features__ as features
 
     levels = sorted((k for k, found in features.items() if found and k.startswith("X86_V")), reverse=True)
     return f"{platform.machine()}, numpy SIMD {levels[0] if levels else 'baseline'}"
@@ -151,8 +154,8 @@ def main() -> None:
         changed = sorted(n for n in runs if stored and stored.get(n, {}).get("record") != runs[n]["record"])
         if changed:
             sys.exit(f"records differ from the stored ones, so this is no other platform of the same behaviour: {changed}")
-        out = {n: {"record": r["record"], "digests": {**stored.get(n, {}).get("digests", {}), label: r["digest"]}}
-               for n, r in runs.items()}
+        out = {n: {**{k: v for k, v in r.items() if k != "digest"},
+                   "digests": {**stored.get(n, {}).get("digests", {}), label: r["digest"]}} for n, r in runs.items()}
         GOLDEN.parent.mkdir(exist_ok=True)
         GOLDEN.write_text(json.dumps(out, indent=1, sort_keys=True) + "\n")
         return

@@ -1,7 +1,7 @@
 """The expert's seeded episodes give the records and decision digests stored in ``golden/records.json``
 (written by ``golden_records.py --write``; a digest per platform, whose float rounding can change a
-multi-vehicle decision stream, see ``golden_records``): a refactor keeps behaviour, step for step, in both fidelities,
-single-ego and multi-agent. They were stored before the envs redesign, which kept them; they are rewritten
+multi-vehicle decision stream, see ``golden_records``): a refactor keeps behaviour, step for step, in both
+fidelities, single-ego and multi-agent. They were stored before the envs redesign, which kept them; they are rewritten
 only for a deliberate change of behaviour, named in its commit (last: a planner sample may stray off the road
 as far as the control law at its speed does, ``planner.on_road``, and the latest-contact fallback brakes among
 tied samples only for a contact met ahead of the ego's centre, else takes the cheapest, ``planner.met_ahead``:
