@@ -9,8 +9,9 @@ The ego is judged against the route it follows, not against a simulator's map ma
   stop-line segment across the lane, so it holds at any speed and only for the lane's own width: a
   pose far off its lane crosses no stop line.
 - **Wrong lane / off-road**: a fraction of the footprint on lanes running the other way / on no
-  lane and no junction. One event per continuous entry: inside a junction (most of the footprint on
-  a junction polygon) the state is held, not judged; after an entry the state must stay clear for
+  lane and no junction. The junction is its polygon and its junction lanes' surface (an imported map's
+  junction lanes can leave the polygon). One event per continuous entry: inside a junction (most of the
+  footprint in it) the state is held, not judged; after an entry the state must stay clear for
   ``REARM_DISTANCE_M`` driven and ``REARM_TIME_S`` before a new entry counts, so jitter at a lane
   edge and the pass through a junction do not count twice.
 """

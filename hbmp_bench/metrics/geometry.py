@@ -142,12 +142,18 @@ class SegmentGrid:
         return np.unique(np.concatenate(parts))
 
 
-class LaneLocator:
-    """Which drivable lane (and which way it runs) lies under given points.
+JUNCTION_LANE = -1
+"""``LaneLocator.lane_index`` of a segment of a junction (internal) lane."""
 
-    Built once per network: every segment of every normal drivable lane with its half width and
-    unit direction in a :class:`SegmentGrid`, plus junction polygons (where internal lanes run);
-    stop lines on demand.
+
+class LaneLocator:
+    """Which drivable lane (and which way it runs) lies under given points, and which points lie in a junction.
+
+    Built once per network: every segment of every drivable lane, normal and junction (internal), with its
+    half width and unit direction in a :class:`SegmentGrid`, plus the junction polygons; stop lines on demand.
+    The junction is its polygon and the surface of its junction lanes: imported maps draw junction lanes
+    along the source's connecting roads, which can leave the polygon netconvert computes (a bend joined at a
+    node, a crossing guessed there), and a car on its own junction lane is on the road there.
     """
 
     def __init__(self, net: RoadNetwork):
@@ -155,17 +161,19 @@ class LaneLocator:
         self._stop_lines: dict[tuple[str, str | None], tuple | None] = {}
         starts, ends, half, lane_ids = [], [], [], []
         names = list(net.lanes)
-        for k, lane_id in enumerate(names):
-            lane = net.lanes[lane_id]
+        lanes = [net.lanes[n] for n in names] + list(net.internal_lanes.values())
+        for k, lane in enumerate(lanes):
             starts.append(lane.shape[:-1])
             ends.append(lane.shape[1:])
             half.append(np.full(len(lane.shape) - 1, lane.width / 2))
-            lane_ids.append(np.full(len(lane.shape) - 1, k))
+            lane_ids.append(np.full(len(lane.shape) - 1, k if k < len(names) else JUNCTION_LANE))
         self.lane_names = names
         self.a = np.concatenate(starts)
         self.b = np.concatenate(ends)
         self.half_width = np.concatenate(half)
         self.lane_index = np.concatenate(lane_ids)
+        """(M,) the normal lane (index into ``lane_names``) of each segment; ``JUNCTION_LANE`` for a segment of
+        a junction (internal) lane."""
         ab = self.b - self.a
         self.seg_len = np.maximum(np.hypot(ab[:, 0], ab[:, 1]), 1e-9)
         self.unit = ab / self.seg_len[:, None]
@@ -174,7 +182,7 @@ class LaneLocator:
         self._bounds = np.ascontiguousarray(np.concatenate([self.hi, -self.lo], axis=1))
         """(M, 4) [hi_x, hi_y, -lo_x, -lo_y]: one comparison culls the segments far from the points."""
         self._grid = SegmentGrid(self.lo, self.hi)
-        self.lane_edge = np.array([net.lanes[n].edge for n in names])
+        self.lane_edge = np.array([net.lanes[n].edge for n in names] + [""])  # [-1]: the junction lanes'
         self.junctions = list(net.junction_shapes.values())
         self.junction_lo = np.array([j.min(0) for j in self.junctions]).reshape(-1, 2)
         self.junction_hi = np.array([j.max(0) for j in self.junctions]).reshape(-1, 2)
@@ -216,7 +224,8 @@ class LaneLocator:
         return self.lane_edge[self.lane_index[segments]] == edge
 
     def locate(self, points: np.ndarray, prefer_edge: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """For points (P, 2): (lane index into ``lane_names`` or -1, lane direction (P, 2), in_junction (P,) bool).
+        """For points (P, 2): (normal lane index into ``lane_names`` or -1, lane direction (P, 2), in_junction (P,)
+        bool: in a junction polygon, or on a junction lane and on no normal lane).
 
         A point on a lane of ``prefer_edge`` (the ego's own edge) is assigned to it even where another
         lane lies under it in plan view (a ramp bridging a carriageway). Compiled
@@ -243,6 +252,8 @@ class LaneLocator:
             np.minimum(np.maximum(t, 0.0, out=t), L, out=t)
             dist = np.hypot(px - (a[:, 0] + t * u[:, 0]), py - (a[:, 1] + t * u[:, 1]))
             inside = dist <= self.half_width[near][None]
+            junction_lane = (inside & (self.lane_index[near] < 0)[None]).any(axis=1)
+            inside &= (self.lane_index[near] >= 0)[None]
             if prefer_edge:
                 own = inside & self.segment_is_edge(near, prefer_edge)[None]
                 inside = np.where(own.any(axis=1, keepdims=True), own, inside)
@@ -251,7 +262,7 @@ class LaneLocator:
             hit = np.isfinite(dist[np.arange(len(points)), best])
             lane[hit] = self.lane_index[near[best[hit]]]
             direction[hit] = u[best[hit]]
-        in_junction = np.zeros(len(points), dtype=bool)
+        in_junction = (lane < 0) & junction_lane if len(near) else np.zeros(len(points), dtype=bool)
         jnear = np.nonzero(np.all(self.junction_hi >= p_lo, axis=1) & np.all(self.junction_lo <= p_hi, axis=1))[0]
         for j in jnear:
             in_junction |= points_in_polygon(points, self.junctions[j])

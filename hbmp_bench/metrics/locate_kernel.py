@@ -30,14 +30,16 @@ def locate_points(points, candidates, bounds, a, unit, seg_len, half_width, lane
         candidates: ascending segment indices the grid gives for the points' box.
         bounds: (M, 4) ``[hi_x, hi_y, -lo_x, -lo_y]`` of each segment's box [m].
         a, unit, seg_len, half_width, lane_index: (M, 2) segment start [m], (M, 2) unit direction,
-            (M,) length [m], (M,) lane half width [m], (M,) lane of each segment.
+            (M,) length [m], (M,) lane half width [m], (M,) lane of each segment (negative: a junction
+            lane, whose surface counts as junction where no normal lane covers a point).
         seg_edge: (M,) edge number of each segment's lane; ``prefer``: the edge number whose lanes win
             where lanes overlap in plan view (-1: none).
         junction_lo, junction_hi: (J, 2) junction polygon boxes [m]; ``junction_xy`` (sum N_j, 2) their
             vertices, junction ``j`` at rows ``junction_start[j]:junction_start[j + 1]``.
 
     Returns:
-        ``(lane (P,) int (-1: none), direction (P, 2), in_junction (P,) bool)``.
+        ``(lane (P,) int (-1: none), direction (P, 2), in_junction (P,) bool)``: in a junction polygon, or
+        on a junction lane and on no normal lane.
     """
     P = points.shape[0]
     lo_x = hi_x = points[0, 0]
@@ -55,11 +57,13 @@ def locate_points(points, candidates, bounds, a, unit, seg_len, half_width, lane
             m += 1
     lane = np.full(P, -1, np.int64)
     direction = np.zeros((P, 2))
+    in_junction = np.zeros(P, np.bool_)
     for p in range(P):
         px = points[p, 0]
         py = points[p, 1]
         best = own_best = np.inf
         best_c = own_c = -1
+        junction_lane = False
         for q in range(m):
             c = near[q]
             ux = unit[c, 0]
@@ -69,6 +73,9 @@ def locate_points(points, candidates, bounds, a, unit, seg_len, half_width, lane
             t = t if t <= seg_len[c] else seg_len[c]
             d = math.hypot(px - (a[c, 0] + t * ux), py - (a[c, 1] + t * uy))
             if d <= half_width[c]:
+                if lane_index[c] < 0:  # a junction lane: junction surface, not a lane to judge against
+                    junction_lane = True
+                    continue
                 if d < best:  # the first minimum, as argmin
                     best, best_c = d, c
                 if seg_edge[c] == prefer and d < own_best:
@@ -78,7 +85,8 @@ def locate_points(points, candidates, bounds, a, unit, seg_len, half_width, lane
             lane[p] = lane_index[k]
             direction[p, 0] = unit[k, 0]
             direction[p, 1] = unit[k, 1]
-    in_junction = np.zeros(P, np.bool_)
+        elif junction_lane:
+            in_junction[p] = True
     for j in range(len(junction_lo)):
         if not (junction_hi[j, 0] >= lo_x and junction_hi[j, 1] >= lo_y
                 and junction_lo[j, 0] <= hi_x and junction_lo[j, 1] <= hi_y):

@@ -6,7 +6,7 @@ import pytest
 from hbmp_bench.maps.roadnet import point_along
 from hbmp_bench.metrics import EgoFrame, InfractionDetector, LaneLocator
 from hbmp_bench.metrics.detectors import REARM_DISTANCE_M, REARM_TIME_S, StopLine
-from hbmp_bench.metrics.geometry import box_corners, boxes_overlap, crosses_line, footprint_points
+from hbmp_bench.metrics.geometry import box_corners, boxes_overlap, crosses_line, footprint_points, points_in_polygon
 from hbmp_bench.scenarios import road_network, suite_episodes
 
 NET = road_network("Town01")
@@ -337,10 +337,17 @@ def test_lane_lookup_agrees_with_a_scan_of_every_segment():
         rel = points[:, None, :] - LOCATOR.a[None]
         t = np.clip(np.einsum("pmk,mk->pm", rel, LOCATOR.unit), 0.0, LOCATOR.seg_len)
         dist = np.hypot(*(rel - t[..., None] * LOCATOR.unit[None]).transpose(2, 0, 1))
-        dist = np.where(dist <= LOCATOR.half_width[None], dist, np.inf)
+        covered = dist <= LOCATOR.half_width[None]
+        normal = LOCATOR.lane_index >= 0
+        dist = np.where(covered & normal[None], dist, np.inf)
         best = np.argmin(dist, axis=1)
         expect = np.where(np.isfinite(dist.min(axis=1)), LOCATOR.lane_index[best], -1)
         np.testing.assert_array_equal(got[0], expect)
+        on_junction_lane = (covered & ~normal[None]).any(axis=1)
+        in_polygon = np.zeros(len(points), dtype=bool)
+        for shape in LOCATOR.junctions:
+            in_polygon |= points_in_polygon(points, shape)
+        np.testing.assert_array_equal(got[2], in_polygon | (on_junction_lane & (expect < 0)))
 
 
 @pytest.mark.parametrize("town", ["Town01", "Town03", "Town05"])
