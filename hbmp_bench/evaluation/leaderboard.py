@@ -41,15 +41,17 @@ from hbmp_bench import __version__
 from hbmp_bench.evaluation.evaluate import code_fingerprint, evaluate
 from hbmp_bench.evaluation.integrity import BoardSnapshot
 from hbmp_bench.evaluation.provenance import git_commit, library_versions, machine_description, utc_now
+from hbmp_bench.evaluation.results_check import ForgedResultsError, check_name, contained, name_problems, verify_results
 from hbmp_bench.evaluation.tasks import RunnerLimits, agent_slug, suite_tasks
 from hbmp_bench.metrics import report
 from hbmp_bench.metrics.records import DRIVING_SCORE_DEFINITION, SIM_ERROR, EpisodeRecord
 from hbmp_bench.metrics.summary import summarize
 from hbmp_bench.scenarios import TASK_LABELS, TASKS, get_suite
 
-RESULTS_FORMAT = 2
-"""Version of the results file layout (2: the ``privileged`` flag). A format-1 file reads as
-privileged: before the flag every agent was handed the privileged scene fields."""
+RESULTS_FORMAT = 3
+"""Version of the results file layout (2: the ``privileged`` flag; 3: the ``salted`` flag and the
+salt's commitment). A format-1 file reads as privileged: before the flag every agent was handed
+the privileged scene fields; format 1 and 2 files read as unsalted (salted mode came with 3)."""
 
 EPISODE_COLUMNS = (
     "town", "task", "episode", "seed", "success", "route_completion", "driving_score", "collision_vehicle",
@@ -65,8 +67,13 @@ class StaleResultsError(ValueError):
 
 def entry_path(board_dir: str | os.PathLike, suite: str, agent: str, subset: bool, fidelity: str) -> Path:
     """``<board>/<suite>/<agent slug>.<fidelity>.json`` (``.subset.json`` for partial runs): one
-    entry per agent and fidelity, ranked in that fidelity's table."""
-    return Path(board_dir) / suite / f"{agent_slug(agent)}.{fidelity}{'.subset' if subset else ''}.json"
+    entry per agent and fidelity, ranked in that fidelity's table. ``suite`` and ``fidelity`` must
+    be names (``results_check.NAME_PATTERN``: no ``/``, no ``..``) and the path must resolve inside
+    ``<board>/<suite>``; ValueError otherwise."""
+    check_name("suite", suite)
+    check_name("fidelity", fidelity)
+    folder = Path(board_dir) / suite
+    return contained(folder / f"{agent_slug(agent)}.{fidelity}{'.subset' if subset else ''}.json", folder)
 
 
 def runs_dir(board_dir: str | os.PathLike, suite: str) -> Path:
@@ -90,32 +97,22 @@ def results_document(
     backend: str = "process",
     privileged: bool = False,
     agent_fingerprint: str = "",
+    salt_commitment: str = "",
+    salt: str = "",
 ) -> dict:
     """The results file content for ``records`` of a selection of ``suite``; ``privileged``: the
     agent read the privileged scene fields (``EvaluationResult.privileged``); ``agent_fingerprint``:
-    its weights (``EvaluationResult.agent_fingerprint``).
+    its weights (``EvaluationResult.agent_fingerprint``); ``salt_commitment``: the SHA-256 of the
+    evaluation's secret salt ("" for the public, unsalted episodes; the entry is then ``salted``)
+    and ``salt`` the salt itself once the run is over (``EvaluationResult.salt``), so anyone can
+    replay the episodes (``audit``).
 
     A git commit alone does not say what ran (the tree may have been edited), so the provenance
     also keeps ``code_fingerprint`` (``evaluate.code_fingerprint``: the package's code and nets as
     they were run) and ``agent_fingerprint``: which checkpoint an entry measured can be checked
     against the one that ships (``checkpoint_fingerprint``)."""
     spec = get_suite(suite)
-    full = (set(towns) == set(spec.towns) and set(tasks) == set(spec.tasks)
-            and list(episodes) == list(range(spec.episodes_per_task)))
-    expected = len(towns) * len(tasks) * len(episodes)
-    sim_errors = sum(r.end_reason == SIM_ERROR for r in records)
-    frame = report.records_frame(records, label=agent) if records else None
-    aggregates = {}
-    if frame is not None:
-        aggregates = {name: report.view_rows(view) for name, view in report.build_report(frame).views.items()}
-        per_task = report.scored(frame).groupby("task")["success"].mean() * 100.0
-        aggregates["success_pct_by_task"] = {t: round(float(per_task[t]), 1) for t in TASKS if t in per_task.index}
-    scored_records = [r for r in records if r.end_reason not in report.EXCLUDED]
-    summary = summarize(scored_records)
-    km = float(sum(r.distance_m for r in scored_records)) / 1000.0
-    events = sum(r.collisions + r.wrong_lane + r.off_road + r.red_light for r in scored_records)
-    summary["success_pct"] = round(100.0 * summary["success_rate"], 2)
-    summary["km_per_infraction"] = round(km / events, 3) if events else None
+    scored = scores(spec.name, records, towns=towns, tasks=tasks, episodes=episodes, agent=agent)
     return {
         "format": RESULTS_FORMAT,
         "suite": spec.name,
@@ -123,13 +120,8 @@ def results_document(
         "agent": agent,
         "fidelity": fidelity,
         "privileged": bool(privileged),
-        "complete": full and len(records) == expected and sim_errors == 0,
-        "subset": not full,
-        "selection": {"towns": list(towns), "tasks": list(tasks), "episodes": list(episodes)},
-        "expected_episodes": expected,
-        "sim_errors": sim_errors,
-        "summary": summary,
-        "aggregates": aggregates,
+        "salted": bool(salt_commitment),
+        **scored,
         "episodes": [{k: r.to_dict()[k] for k in EPISODE_COLUMNS} for r in records],
         "provenance": {
             "package_version": __version__,
@@ -139,6 +131,8 @@ def results_document(
             "suite_definition_hash": spec.definition_hash(),
             "seeds": {"suite_seed": spec.seed, "reset_seed": "episode index",
                       "episode_seeds": "per episode in 'episodes'"},
+            "salt_commitment": salt_commitment,
+            "salt": salt,
             "date_utc": utc_now(),
             "machine": machine_description(),
             "libraries": library_versions(),
@@ -150,14 +144,55 @@ def results_document(
     }
 
 
+def scores(suite: str, records: Sequence[EpisodeRecord], *, towns: Sequence[str], tasks: Sequence[str],
+           episodes: Sequence[int], agent: str = "", aggregates: bool = True) -> dict:
+    """What a results file derives from its episode records and its selection of ``suite``:
+    ``complete``, ``subset``, ``selection``, ``expected_episodes``, ``sim_errors``, ``summary`` and
+    ``aggregates`` (the report views; only ``success_pct_by_task`` when ``aggregates`` is False,
+    which is what the board's tables show). One function for ``submit``, ``add`` and ``render``,
+    so a file's claims are checked by recomputing them (``results_check``)."""
+    spec = get_suite(suite)
+    full = (set(towns) == set(spec.towns) and set(tasks) == set(spec.tasks)
+            and list(episodes) == list(range(spec.episodes_per_task)))
+    expected = len(towns) * len(tasks) * len(episodes)
+    sim_errors = sum(r.end_reason == SIM_ERROR for r in records)
+    frame = report.records_frame(records, label=agent) if records else None
+    views = {}
+    if frame is not None:
+        if aggregates:
+            views = {name: report.view_rows(view) for name, view in report.build_report(frame).views.items()}
+        per_task = report.scored(frame).groupby("task")["success"].mean() * 100.0
+        views["success_pct_by_task"] = {t: round(float(per_task[t]), 1) for t in TASKS if t in per_task.index}
+    scored_records = [r for r in records if r.end_reason not in report.EXCLUDED]
+    summary = summarize(scored_records)
+    km = float(sum(r.distance_m for r in scored_records)) / 1000.0
+    events = sum(r.collisions + r.wrong_lane + r.off_road + r.red_light for r in scored_records)
+    summary["success_pct"] = round(100.0 * summary["success_rate"], 2)
+    summary["km_per_infraction"] = round(km / events, 3) if events else None
+    return {
+        "complete": full and len(records) == expected and sim_errors == 0,
+        "subset": not full,
+        "selection": {"towns": list(towns), "tasks": list(tasks), "episodes": list(episodes)},
+        "expected_episodes": expected,
+        "sim_errors": sim_errors,
+        "summary": summary,
+        "aggregates": views,
+    }
+
+
 def check_results(doc: dict, source: str = "results") -> dict:
     """``doc`` if it is a results file of the installed suite whose ``complete`` and ``sim_errors``
-    agree with its episodes; else a clear error. A format-1 file is read as format 2 with
-    ``privileged`` true (see :data:`RESULTS_FORMAT`)."""
+    agree with its episodes; else a clear error. A format-1 file is read as format 3 with
+    ``privileged`` true, a format 1 or 2 file as unsalted (see :data:`RESULTS_FORMAT`). Everything
+    else a file claims is checked by ``results_check.verify_results``."""
     if isinstance(doc, dict) and doc.get("format") == 1 and "privileged" not in doc:
-        doc = {**doc, "format": RESULTS_FORMAT, "privileged": True}
-    if not isinstance(doc, dict) or doc.get("format") != RESULTS_FORMAT or "suite" not in doc:
+        doc = {**doc, "format": 2, "privileged": True}
+    if isinstance(doc, dict) and doc.get("format") == 2:
+        doc = {**doc, "format": RESULTS_FORMAT, "salted": False}
+    if not isinstance(doc, dict) or doc.get("format") != RESULTS_FORMAT or not isinstance(doc.get("suite"), str):
         raise ValueError(f"{source} is not a leaderboard results file (format {RESULTS_FORMAT})")
+    if not isinstance(doc.get("provenance"), dict):
+        raise ValueError(f"{source} has no provenance")
     if not isinstance(doc.get("privileged"), bool):
         raise ValueError(f"{source} has no privileged flag (true or false)")
     episodes = doc.get("episodes")
@@ -169,6 +204,9 @@ def check_results(doc: dict, source: str = "results") -> dict:
     if doc.get("complete") and (sim_errors or doc.get("subset") or len(episodes) != doc.get("expected_episodes")):
         raise ValueError(f"{source} says complete, but it has {len(episodes)} of {doc.get('expected_episodes')} "
                          f"episodes, {sim_errors} sim errors, subset={doc.get('subset')!r}")
+    name_issues = name_problems(doc)
+    if name_issues:
+        raise ForgedResultsError(source, name_issues)
     current = get_suite(doc["suite"]).definition_hash()
     if doc.get("suite_hash") != current:
         raise StaleResultsError(
@@ -179,10 +217,12 @@ def check_results(doc: dict, source: str = "results") -> dict:
     return doc
 
 
-def results_records(path: str | os.PathLike) -> list[EpisodeRecord]:
-    """The episode records of a results file (checked, see :func:`check_results`), as the
-    evaluation wrote them: so ``hbmp-bench report`` reads leaderboard entries like records files."""
-    doc = check_results(json.loads(Path(path).read_text(encoding="utf-8")), str(path))
+def results_records(path: str | os.PathLike | dict) -> list[EpisodeRecord]:
+    """The episode records of a results file (checked, see :func:`check_results`; or of a results
+    document already read), as the evaluation wrote them: so ``hbmp-bench report`` reads
+    leaderboard entries like records files."""
+    doc = path if isinstance(path, dict) else check_results(json.loads(Path(path).read_text(encoding="utf-8")),
+                                                             str(path))
     shared = {"suite": doc["suite"], "agent": doc["agent"], "fidelity": doc["fidelity"],
               "package_version": doc.get("provenance", {}).get("package_version", "")}
     return [EpisodeRecord(**{**episode, **shared}) for episode in doc["episodes"]]
@@ -201,14 +241,22 @@ def write_json(path: Path, doc: dict) -> Path:
     return path
 
 
-def load_entries(board_dir: str | os.PathLike, suite: str) -> list[dict]:
-    """Every results file of a suite's board, checked (a stale one raises ``StaleResultsError``)."""
+def load_entries(board_dir: str | os.PathLike, suite: str, skip: str | None = None) -> list[dict]:
+    """Every results file of a suite's board, checked: a stale one raises ``StaleResultsError``, one
+    whose summary, completeness or names do not follow from its episodes, or that lies under
+    another entry's file name, ``ForgedResultsError`` (``results_check.verify_results`` without
+    the checks against the suite's episode list, which ``add`` makes). ``skip``: a file name left out."""
     folder = Path(board_dir) / get_suite(suite).name
     entries = []
-    for path in sorted(folder.glob("*.json")):
+    for path in sorted(p for p in folder.glob("*.json") if p.name != skip):
         doc = check_results(json.loads(path.read_text(encoding="utf-8")), str(path))
         if doc["suite"] != get_suite(suite).name:
             raise ValueError(f"{path} holds results of suite {doc['suite']!r}, not {suite!r}")
+        verify_results(doc, str(path), against_suite=False)
+        own = entry_path(board_dir, doc["suite"], doc["agent"], doc["subset"], doc["fidelity"]).name
+        if path.name != own:
+            raise ForgedResultsError(str(path), [f"its agent {doc['agent']!r}, fidelity {doc['fidelity']!r} and "
+                                                 f"subset={doc['subset']} belong in {own}, not {path.name}"])
         entries.append(doc | {"_file": path.name})
     return entries
 
@@ -241,9 +289,22 @@ def _row(doc: dict, rank: str) -> list[str]:
         NO_INFRACTION if km is None else f"{km:.2f}", f"{s.get('episodes', 0)} of {_suite_episodes(doc['suite'])}",
         str(doc.get("sim_errors", 0)),
         prov.get("package_version") or "", (prov.get("git_commit") or "")[:10],
-        (prov.get("agent_fingerprint") or "–")[:10], (prov.get("date_utc") or "")[:10],
+        _weights(doc), (prov.get("date_utc") or "")[:10],
         "" if prov.get("wall_time_s") is None else f"{prov['wall_time_s']:.0f}",
+        (prov.get("salt_commitment") or "")[:10] if doc.get("salted") else "no",
     ]
+
+
+def _weights(doc: dict) -> str:
+    """The weights column: the first digits of ``agent_fingerprint`` ("–" without one), marked
+    "(claimed)" for a ``module:Class`` agent, whose fingerprint is its own word."""
+    from hbmp_bench.agents import AGENTS
+
+    fingerprint = (doc["provenance"].get("agent_fingerprint") or "")[:10]
+    if not fingerprint:
+        return "–"
+    own_claim = doc["agent"] not in AGENTS and not doc["agent"].endswith(".pt")
+    return f"{fingerprint} (claimed)" if own_claim else fingerprint
 
 
 NO_INFRACTION = "no infraction"
@@ -251,7 +312,7 @@ NO_INFRACTION = "no infraction"
 
 HEADER = ["rank", "agent", "privileged", "success %", *(TASK_LABELS[t] + " %" for t in TASKS), "driving score",
           "route completion %", "km / infraction", "episodes", "sim errors", "version", "commit", "weights", "date",
-          "wall s"]
+          "wall s", "salted"]
 
 
 def _table(rows: Iterable[list[str]]) -> str:
@@ -280,7 +341,9 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
         "count as failed episodes; sim errors (the simulator failed, not the agent) are not scored, and an "
         "entry with any is not ranked. An agent marked privileged read the simulator's privileged scene (light "
         "schedules, junction foes, the leader; the rule-based expert, a reference): not comparable with an agent "
-        "that sees M_t and R_t only.\n",
+        "that sees M_t and R_t only. salted: the first digits of the SHA-256 of the secret salt its traffic, "
+        "pedestrians and light phases took (an agent could not rebuild its episodes; the salt is in the results "
+        "file, for `hbmp-bench leaderboard audit`), no for the public episodes.\n",
     ]
     if not ranked:
         parts.append("No complete entries yet.\n")
@@ -303,13 +366,35 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
 
 
 def add_results(path: str | os.PathLike, board_dir: str | os.PathLike) -> Path:
-    """Check a results file made elsewhere and install it on its suite's board; returns its new path."""
+    """Check a results file made elsewhere and install it on its suite's board; returns its new path.
+
+    Everything the file claims is recomputed from its episodes and its suite and must agree
+    (``results_check.verify_results``: summary, completeness, the suite's episodes, consistent
+    records, names that reach a path, the agent's privileged flag and fingerprint, the salt); the
+    installed file holds the recomputed aggregates. It must not replace another agent's entry, and
+    the board's other entries must pass the checks too. Raises ``ForgedResultsError`` (or
+    ``StaleResultsError``, ``ValueError``) and writes nothing when anything does not add up."""
     source = Path(path)
-    doc = check_results(json.loads(source.read_text(encoding="utf-8")), str(source))
+    try:
+        raw = json.loads(source.read_text(encoding="utf-8"), parse_constant=_no_constant)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{source} is not JSON: {exc}") from None
+    doc = check_results(raw, str(source))
+    recomputed = verify_results(doc, str(source), against_suite=True)
     target = entry_path(board_dir, doc["suite"], doc["agent"], doc["subset"], doc["fidelity"])
-    write_json(target, {k: v for k, v in doc.items() if not k.startswith("_")})
+    load_entries(board_dir, doc["suite"], skip=target.name)  # so rendering the board cannot fail after the write
+    if target.exists():
+        held = json.loads(target.read_text(encoding="utf-8")).get("agent")
+        if held != doc["agent"]:
+            raise ForgedResultsError(str(source), [f"its agent {doc['agent']!r} would replace {target}, the entry of "
+                                                   f"agent {held!r}"])
+    write_json(target, {**{k: v for k, v in doc.items() if not k.startswith("_")}, **recomputed})
     render_readme(board_dir, doc["suite"])
     return target
+
+
+def _no_constant(name: str):
+    raise ValueError(f"results files hold finite numbers only, not {name}")
 
 
 def submit(
@@ -336,7 +421,8 @@ def submit(
     changed behind its back while it ran.
     """
     spec = get_suite(suite)
-    load_entries(board_dir, spec.name)  # refuse before a long run if the board holds stale files
+    check_name("agent", agent)
+    load_entries(board_dir, spec.name)  # refuse before a long run if the board holds stale or forged files
     snapshot = BoardSnapshot(Path(board_dir) / spec.name)
     selection = suite_tasks(spec.name, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity)
     result = evaluate(spec.name, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity,

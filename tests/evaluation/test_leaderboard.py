@@ -107,8 +107,8 @@ def test_a_format_1_results_file_reads_as_privileged(board, tmp_path):
     """Before the privileged flag (results format 2) every agent was handed the privileged scene."""
     path = entry_path(board, tiny_suite.NAME, "keep", subset=False, fidelity=FIDELITY)
     doc = json.loads(path.read_text())
-    assert doc["format"] == 2 and doc["privileged"] is False
-    old = {k: v for k, v in doc.items() if k != "privileged"} | {"format": 1}
+    assert doc["format"] == 3 and doc["privileged"] is False and doc["salted"] is False
+    old = {k: v for k, v in doc.items() if k not in ("privileged", "salted")} | {"format": 1}
     legacy = tmp_path / "legacy.json"
     legacy.write_text(json.dumps(old))
     target = add_results(legacy, tmp_path / "board")
