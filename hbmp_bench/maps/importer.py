@@ -13,7 +13,10 @@ What an import does:
    (``guess_lights``); ``lights="lawful"`` rebuilds the programs with the benchmark's lawful timing
    (the built-in towns' all-red, greens and kinematic yellows, :mod:`~hbmp_bench.maps.signals`),
    ``"source"`` keeps the map's (re-phased by netconvert only where guessed crossings join a light).
-   Steps 2 and 3 are one netconvert run over the net; a net that needs none is stored byte for byte.
+   Crossings at nodes that only join two pieces of a road are discarded (:mod:`~hbmp_bench.maps.crossings`:
+   netconvert widens such a node over the road for the crossing and cuts the piece between to a stub).
+   Steps 2 and 3 are one netconvert run over the net (and one more to drop the crossings the sidewalk
+   guess adds at such nodes); a net that needs none is stored byte for byte.
 4. Provenance beside the net (``<name>.map.json``, :func:`map_info`): the source file's name and
    SHA-256, the stored net's SHA-256 (records are keyed to it), the netconvert version and every
    option it ran with, the date, and the task parameters (``like``: a built-in town whose CoRL
@@ -37,6 +40,7 @@ import xml.parsers.expat
 from pathlib import Path
 
 from ..errors import UnknownNameError, UserError
+from .crossings import continuation_crossings, discard_xml
 from .lanetypes import allows, lane_patches, patch_xml, typemap_xml
 from .netconvert import netconvert_version, run_netconvert
 from .registry import INFO_SUFFIX, NET_SUFFIX, file_sha256, info_path, user_maps, user_maps_dir
@@ -215,13 +219,17 @@ def import_map(path: str | Path, name: str, *, like: str | None = None, sidewalk
         root = ET.parse(staged).getroot()
         source_tls = _tls_count(root)
         patches = lane_patches(root)
+        discarded = continuation_crossings(root)
         guess_sidewalks = sidewalks and not _has_walkable_edge(root)
         final = staged
-        if patches or guess_sidewalks or guess_lights or lights == "lawful":
+        if patches or discarded or guess_sidewalks or guess_lights or lights == "lawful":
             args = ["--sumo-net-file", staged.name, *NET_OPTIONS]
             if patches:
                 (tmp_dir / "lanetypes.edg.xml").write_text(patch_xml(patches), encoding="utf-8")
                 args += ["--edge-files", "lanetypes.edg.xml"]
+            if discarded:
+                (tmp_dir / "crossings.con.xml").write_text(discard_xml(discarded), encoding="utf-8")
+                args += ["--connection-files", "crossings.con.xml"]
             if guess_sidewalks:
                 args += list(SIDEWALK_OPTIONS)
             if guess_lights:
@@ -232,6 +240,16 @@ def import_map(path: str | Path, name: str, *, like: str | None = None, sidewalk
             args += ["--output-file", final.name]
             _netconvert(args, tmp_dir, label, "net rebuild")
             runs.append(args)
+            guessed = continuation_crossings(ET.parse(final).getroot()) if guess_sidewalks else []
+            if guessed:  # crossings the sidewalk guess put at continuation nodes: one more pass drops them
+                (tmp_dir / "guessed.con.xml").write_text(discard_xml(guessed), encoding="utf-8")
+                staged_again = tmp_dir / "guessed.net.xml"
+                final.replace(staged_again)
+                args = ["--sumo-net-file", staged_again.name, *NET_OPTIONS, "--connection-files", "guessed.con.xml",
+                        *(LAWFUL_LIGHT_OPTIONS if lights == "lawful" else ()), "--output-file", final.name]
+                _netconvert(args, tmp_dir, label, "crossing removal")
+                runs.append(args)
+                discarded += guessed
             if lights == "lawful":
                 retime_yellows(final)
             validate_net(final, label)
@@ -250,6 +268,7 @@ def import_map(path: str | Path, name: str, *, like: str | None = None, sidewalk
             "tls_guessed": guess_lights,
             "lanes_closed": {kind: sum(p[2] == kind for p in patches) for kind in sorted({p[2] for p in patches})},
             "sidewalks_guessed": guess_sidewalks,
+            "crossings_discarded": len(discarded),
         }
         _install(final, info, name)
     from .roadnet import load_road_network
