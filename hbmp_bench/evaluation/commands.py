@@ -1,4 +1,4 @@
-"""Sub-commands ``evaluate``, ``report`` and ``leaderboard {submit,add,render}`` of ``hbmp-bench``."""
+"""Sub-commands ``evaluate``, ``report`` and ``leaderboard {submit,add,audit,render}`` of ``hbmp-bench``."""
 
 from __future__ import annotations
 
@@ -128,6 +128,15 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
     if args.leaderboard_cmd == "render":
         print(f"wrote {leaderboard.render_readme(args.board_dir, args.suite)}")
         return 0
+    if args.leaderboard_cmd == "audit":
+        from hbmp_bench.evaluation.audit import audit, audit_lines
+        from hbmp_bench.evaluation.tasks import RunnerLimits
+
+        result = audit(args.entry, args.agent, args.sample, seed=args.seed, max_sim_s=args.max_sim_s,
+                       workers=args.workers, limits=RunnerLimits(decision_timeout_s=args.decision_timeout),
+                       progress=not args.json)
+        print("\n".join(audit_lines(result, args.json)))
+        return 0 if result.ok else 1
     raise AssertionError(args.leaderboard_cmd)
 
 
@@ -193,6 +202,17 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     q = lsub.add_parser("add", help="check a results file made elsewhere and add it to its board")
     q.add_argument("file", help="results JSON written by leaderboard submit")
     q.add_argument("--board-dir", default="leaderboards", help="leaderboard folder")
+    q = lsub.add_parser("audit", help="replay random episodes of an entry with an agent; exit 1 unless every "
+                        "record matches field by field")
+    q.add_argument("entry", help="a results file (leaderboards/<suite>/<agent>.<fidelity>.json)")
+    q.add_argument("--agent", required=True, help="the agent to replay: registry name, module:Class or checkpoint")
+    q.add_argument("--sample", type=int, default=5, help="episodes to replay, drawn at random (default 5)")
+    q.add_argument("--seed", type=int, default=None, help="seed of the draw (default: fresh randomness)")
+    q.add_argument("--max-sim-s", type=float, default=None,
+                   help="draw only episodes that lasted at most this many simulated seconds [s] (a quick audit)")
+    q.add_argument("--workers", type=int, default=1, help="parallel slots (default 1)")
+    q.add_argument("--decision-timeout", type=float, default=10.0, help="seconds per agent decision [s]")
+    q.add_argument("--json", action="store_true", help="print the audit as JSON (no progress bar)")
     q = lsub.add_parser("render", help="regenerate <board>/<suite>/README.md")
     q.add_argument("--suite", default="corl2017", help="the suite whose board to render")
     q.add_argument("--board-dir", default="leaderboards", help="leaderboard folder")

@@ -62,8 +62,22 @@ def library_versions() -> dict[str, str | None]:
     return out
 
 
+def float_platform() -> str:
+    """The machine as far as float rounding goes: its architecture and the highest SIMD level numpy
+    dispatches to (e.g. ``x86_64, numpy SIMD X86_V3``: AVX2 and FMA, no AVX-512). Episodes replay
+    bit for bit on the same one (``audit``); another may round a transcendental differently."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_features__ as features
+    except ImportError:  # numpy 1.x
+        from numpy.core._multiarray_umath import __cpu_features__ as features
+
+    levels = sorted((k for k, found in features.items() if found and k.startswith("X86_V")), reverse=True)
+    return f"{platform.machine()}, numpy SIMD {levels[0] if levels else 'baseline'}"
+
+
 def machine_description() -> dict[str, object]:
-    """OS, CPU model and count, Python: enough to compare wall times between entries."""
+    """OS, CPU model and count, Python: enough to compare wall times between entries; and the
+    :func:`float_platform` an audit replays on."""
     cpu = platform.processor() or platform.machine()
     try:
         with open("/proc/cpuinfo", encoding="utf-8") as fh:
@@ -75,6 +89,7 @@ def machine_description() -> dict[str, object]:
         "cpu": cpu,
         "cpu_count": os.cpu_count(),
         "python": platform.python_version(),
+        "float_platform": float_platform(),
     }
 
 

@@ -25,6 +25,10 @@ class EpisodeTask:
             also the reset seed, so every agent meets the same traffic).
         agent: registry name, ``module:Class`` or checkpoint spec given to ``load_agent``.
         fidelity: the resolved world fidelity (never None here; see ``default_fidelity``).
+        salt: the evaluation's secret salt (hex), mixed into the seed of the episode's traffic,
+            pedestrians and light phases (``DrivingWorld.start``); "" for the public episodes.
+            Only the env process gets it (never the agent process), it is no part of ``key`` and
+            is left out of the task's repr.
     """
 
     suite: str
@@ -33,6 +37,7 @@ class EpisodeTask:
     episode: int
     agent: str
     fidelity: str
+    salt: str = dataclasses.field(default="", repr=False)
 
     @property
     def key(self) -> tuple[str, str, str, int, str, str]:
@@ -145,6 +150,7 @@ def suite_tasks(
     tasks: Sequence[str] | None = None,
     episodes: int | Iterable[int] | None = None,
     fidelity: str | None = None,
+    salt: str = "",
 ) -> list[EpisodeTask]:
     """Every episode of a suite selection, ordered by town, task and index.
 
@@ -152,6 +158,8 @@ def suite_tasks(
         towns / tasks: subsets of the suite's (None: all of them).
         episodes: the first N episodes per (town, task), or explicit indices (None: all).
         fidelity: None resolves to ``default_fidelity()``; an unknown one raises ValueError.
+        salt: the evaluation's secret salt for every task ("" : the public episodes; see
+            ``EpisodeTask.salt``).
     """
     spec = get_suite(suite)
     towns = list(dict.fromkeys(check_town(t) for t in (towns or spec.towns)))
@@ -173,7 +181,8 @@ def suite_tasks(
     WorldConfig(fidelity=fidelity)  # a bad fidelity fails here, naming the valid ones, not in every episode
     order = {t: k for k, t in enumerate(TASKS)}
     tasks = sorted(tasks, key=lambda t: order[t])
-    return [EpisodeTask(spec.name, town, task, i, agent, fidelity) for town in towns for task in tasks for i in indices]
+    return [EpisodeTask(spec.name, town, task, i, agent, fidelity, salt) for town in towns for task in tasks
+            for i in indices]
 
 
 def adopt_environment(environ: dict[str, str] | None) -> None:
