@@ -114,7 +114,35 @@ def _cmd_maps(args: argparse.Namespace) -> int:
         remove_map(args.name)
         print(f"removed {args.name}")
         return 0
+    if args.maps_cmd == "audit":
+        return _audit_maps(args)
     raise AssertionError(args.maps_cmd)
+
+
+def _audit_maps(args: argparse.Namespace) -> int:
+    """``maps audit``: exit 1 where the detectors flag SUMO's own driving (the disagreements are printed)."""
+    from tqdm import tqdm
+
+    from hbmp_bench.evaluation.lane_audit import audit_lane_keeping
+
+    summaries = []
+    for name in args.names:
+        with tqdm(desc=f"audit {name}", unit="drive", disable=args.json, file=sys.stderr) as bar:
+            def progress(done: int, total: int, bar=bar) -> None:
+                bar.total = total
+                bar.update(done - bar.n)
+
+            summaries.append(audit_lane_keeping(name, args.suites, progress=progress).summary())
+    if args.json:
+        print(json.dumps(summaries, indent=2))
+    for s in summaries if not args.json else ():
+        print(f"{s['town']}: {s['drives']} drives ({s['episodes']} episodes of {', '.join(s['suites'])}), "
+              f"{s['distance_km']} km: {s['wrong_lane']} wrong lane, {s['off_road']} off-road, {s['stuck']} stuck")
+        for line in s["disagreements"]:
+            print(f"  {line}")
+        if s["stuck"]:
+            print(f"  did not reach their route's end: {', '.join(s['stuck_episodes'])}")
+    return 1 if any(s["wrong_lane"] or s["off_road"] for s in summaries) else 0
 
 
 class HelpFormatter(argparse.RawDescriptionHelpFormatter):
@@ -160,7 +188,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--json", action="store_true", help="print a JSON summary with every episode record")
     p.set_defaults(func=_cmd_run)
 
-    p = sub.add_parser("maps", help="map statistics, import and removal")
+    p = sub.add_parser("maps", help="map statistics, import, removal and the detectors' audit")
     msub = p.add_subparsers(dest="maps_cmd", required=True)
     q = msub.add_parser("stats", help="statistics of built-in and imported maps")
     q.add_argument("names", nargs="*", help="maps to describe side by side, or SUMO .net.xml files as they are "
@@ -180,6 +208,11 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--force", action="store_true", help="replace an imported map of the same name")
     q = msub.add_parser("remove", help="delete an imported map")
     q.add_argument("name", help="an imported map's name")
+    q = msub.add_parser("audit", help="drive every route of the suites with SUMO's own driver and list where the "
+                        "wrong-lane and off-road detectors disagree with it (exit 1 if anywhere)")
+    q.add_argument("names", nargs="+", help="built-in or imported maps")
+    q.add_argument("--suites", nargs="*", default=None, help="suites whose routes to drive; default: every suite")
+    q.add_argument("--json", action="store_true", help="print JSON (no progress bar)")
     p.set_defaults(func=_cmd_maps)
 
     for module_name in COMMAND_MODULES:

@@ -31,22 +31,27 @@ def node_neighbours(root: ET.Element) -> dict[str, set[str]]:
     return out
 
 
-def continuation_crossings(root: ET.Element) -> list[tuple[str, tuple[str, ...]]]:
-    """The crossings of a SUMO net at continuation nodes (see the module docstring): (node id, crossed
-    edge ids), sorted. A crossing's node is the junction whose internal lanes list the crossing's lane."""
+def crossings_by_node(root: ET.Element) -> list[tuple[str, tuple[str, ...]]]:
+    """Every crossing of a SUMO net (its parsed root element): (node id, crossed edge ids), sorted. A crossing's
+    node is the junction whose internal lanes list the crossing's lane."""
     node_of_lane = {lane: j.get("id") for j in root.iter("junction") if j.get("type") != "internal"
                     for lane in (j.get("intLanes") or "").split()}
-    neighbours = node_neighbours(root)
     out = []
     for edge in root.iter("edge"):
         if edge.get("function") != "crossing":
             continue
         crossed = tuple((edge.get("crossingEdges") or "").split())
-        lanes = [lane.get("id") for lane in edge.findall("lane")]
-        node = next((node_of_lane[lane] for lane in lanes if lane in node_of_lane), None)
-        if crossed and node is not None and len(neighbours.get(node, ())) <= 2:
+        node = next((node_of_lane[lane.get("id")] for lane in edge.findall("lane") if lane.get("id") in node_of_lane),
+                    None)
+        if crossed and node is not None:
             out.append((node, crossed))
     return sorted(out)
+
+
+def continuation_crossings(root: ET.Element) -> list[tuple[str, tuple[str, ...]]]:
+    """The crossings of :func:`crossings_by_node` at continuation nodes (see the module docstring)."""
+    neighbours = node_neighbours(root)
+    return [(node, crossed) for node, crossed in crossings_by_node(root) if len(neighbours.get(node, ())) <= 2]
 
 
 def discard_xml(crossings: list[tuple[str, tuple[str, ...]]]) -> str:
@@ -56,4 +61,4 @@ def discard_xml(crossings: list[tuple[str, tuple[str, ...]]]) -> str:
     return "<connections>\n" + "\n".join(rows) + "\n</connections>\n"
 
 
-__all__ = ["continuation_crossings", "discard_xml", "node_neighbours"]
+__all__ = ["continuation_crossings", "crossings_by_node", "discard_xml", "node_neighbours"]
