@@ -76,6 +76,7 @@ from hbmp_bench.envs.config import ScenarioConfig, WorldConfig
 from hbmp_bench.envs.observation import ObservationConfig, observation_space
 from hbmp_bench.envs.world import EGO_ID, DrivingWorld
 from hbmp_bench.planning.behaviors import BEHAVIORS
+from hbmp_bench.scenarios import check_salt
 
 
 def _controlled_count(controlled: str | int, vehicles: int) -> int:
@@ -165,10 +166,16 @@ class TrafficParallelEnv(ParallelEnv):
         return self._world
 
     def reset(self, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Start an episode. ``options``: ``episode_index`` (an episode of the list) and ``salt``
+        (a salted evaluation's secret, hex: the episode's traffic, pedestrians and light phases
+        take it, see ``DrivingWorld.start``; "" or absent: the public episode)."""
         if seed is not None or self._world is None:
             self._rng = np.random.default_rng(seed)
-        episode = self.scenario.pick(self._rng, (options or {}).get("episode_index"))
-        obs, infos = self.world.start(episode, seed=int(self._rng.integers(2**31)), controlled=self.n_controlled)
+        options = options or {}
+        salt = check_salt(options.get("salt") or "")
+        episode = self.scenario.pick(self._rng, options.get("episode_index"))
+        obs, infos = self.world.start(episode, seed=int(self._rng.integers(2**31)), controlled=self.n_controlled,
+                                      salt=salt)
         self.agents = list(self.world.live)
         self._frames, self._last_behavior = [], ""
         if self.render_mode == "rgb_array":

@@ -31,10 +31,12 @@ from hbmp_bench.metrics.detectors import InfractionDetector, StepEvents
 from hbmp_bench.metrics.episode import EpisodeId, add_events
 from hbmp_bench.metrics.geometry import LaneLocator
 from hbmp_bench.metrics.records import EpisodeRecord
-from hbmp_bench.scenarios import Episode, road_network
+from hbmp_bench.scenarios import Episode, episode_entropy, road_network
 from hbmp_bench.sim.sumo import BACKGROUND_TYPE, EGO_TYPE, SumoSim, VehicleType
 
 EGO_ID = "ego"
+LIGHT_STREAM = 0x4C49474854
+"""Last entropy word of the light phases' stream in a salted episode (apart from the traffic's)."""
 CONTROLLED_SPACING_M = 12.0
 """Least gap between two controlled vehicles inserted on the same lane [m] (SUMO delays an
 insertion onto an occupied place; a controlled vehicle must exist from the first step)."""
@@ -74,19 +76,30 @@ class DrivingWorld:
                            cfg.steps_per_decision)
 
     # --------------------------------------------------------------- episode
-    def start(self, episode: Episode, seed: int, controlled: int = 0) -> tuple[dict, dict]:
-        """Start ``episode`` with SUMO seed ``seed``; returns ({vehicle: observation}, {vehicle: info}).
+    def start(self, episode: Episode, seed: int, controlled: int = 0, salt: str = "") -> tuple[dict, dict]:
+        """Start ``episode`` with reset seed ``seed``; returns ({vehicle: observation}, {vehicle: info}).
 
         ``controlled``: background vehicles ``bg0``..``bg{controlled-1}`` are driven by agents and
         inserted where nothing else stands, so all of them exist after the first step; 0 leaves
-        the traffic exactly as SUMO's."""
+        the traffic exactly as SUMO's.
+
+        Every random stream of the run (SUMO's seed, where each background vehicle and pedestrian
+        starts and goes) draws from ``scenarios.episode_entropy(episode.seed, seed, salt)``. A
+        ``salt`` (a salted evaluation's secret, see ``evaluation.salting``) changes all of them and
+        also starts each traffic light's fixed-time program at a random point of its cycle
+        (:data:`LIGHT_STREAM`); the start, goal and route stay the episode's. "" runs the public
+        episode exactly as before salting existed."""
         if episode.town != self.town:
             raise ValueError(f"episode is in {episode.town}, world is {self.town}")
         if controlled > episode.traffic.vehicles:
             raise ValueError(f"{controlled} controlled vehicles asked, the episode has {episode.traffic.vehicles}")
         self.episode = episode
-        rng = np.random.default_rng([episode.seed, seed])
+        entropy = episode_entropy(episode.seed, seed, salt)
+        rng = np.random.default_rng(entropy)
         self.sim.start(seed=int(rng.integers(2**31)))
+        if salt:
+            lights = np.random.default_rng([*entropy, LIGHT_STREAM])
+            self.sim.shift_light_phases({tls: float(lights.random()) for tls in sorted(self.sim.light_ids())})
         start = self.net.lane(episode.start_lane)
         self.sim.add_vehicle(EGO_ID, episode.route + continuation(self.net, episode.route[-1]), lane_index=start.index,
                              pos=episode.start_pos, speed=0.0, vtype=EGO_TYPE)
@@ -106,7 +119,7 @@ class DrivingWorld:
         for k, (name, route) in enumerate(routes.items()):
             self.vehicles[name] = ControlledVehicle(
                 name, BACKGROUND_TYPE, self.make_driver(name, BACKGROUND_TYPE, self.config.background_fidelity),
-                shared, LoopRoute(route, np.random.default_rng([episode.seed, seed, k + 1])),
+                shared, LoopRoute(route, np.random.default_rng([*entropy, k + 1])),
                 InfractionDetector(self.locator, NOWHERE, 0.0, np.inf), EndRules(on_collision=True, on_violation=False))
         self.live = list(self.vehicles)
         self._running, self._committed = set(), set()

@@ -59,6 +59,9 @@ def _add_selection(p: argparse.ArgumentParser, agent_default: str | None) -> Non
     p.add_argument("--agent-user", default=default.agent_user,
                    help=f"when run as root, the unprivileged user the agent process runs as (default "
                         f"{default.agent_user}); '' keeps root: only for trusted agents")
+    p.add_argument("--salted", action="store_true",
+                   help="salted episodes: traffic, pedestrians and light phases take a secret salt, revealed "
+                        "when the run is complete (an agent cannot rebuild its episodes; see README)")
     p.add_argument("--json", action="store_true", help="print a JSON summary (no progress bar)")
 
 
@@ -70,10 +73,12 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
 
     result = evaluate(args.suite, args.agent, towns=args.towns, tasks=args.tasks, episodes=args.episodes,
                       fidelity=args.fidelity, out_dir=args.out, workers=args.workers, backend=args.backend,
-                      address=args.address, limits=_limits(args), progress=not args.json)
+                      address=args.address, limits=_limits(args), progress=not args.json, salted=args.salted)
     summary = {"records": str(result.path), "ran": result.ran, "skipped": result.skipped,
                "missing": result.missing, "wall_s": round(result.wall_s, 2), "sim_errors": result.sim_errors,
                "agent_errors": result.agent_errors, **summarize(result.records)}
+    if args.salted:
+        summary.update(salt_commitment=result.salt_commitment, salt=result.salt or "(revealed once every episode is recorded)")
     if args.json:
         print(json.dumps(summary, indent=2))
         return 0
@@ -118,7 +123,8 @@ def _cmd_leaderboard(args: argparse.Namespace) -> int:
         path, doc = leaderboard.submit(
             args.suite, args.agent, board_dir=args.board_dir, towns=args.towns, tasks=args.tasks,
             episodes=args.episodes, fidelity=args.fidelity, workers=args.workers, backend=args.backend,
-            address=args.address, limits=_limits(args), records_dir=args.records_dir, progress=not args.json)
+            address=args.address, limits=_limits(args), records_dir=args.records_dir, progress=not args.json,
+            salted=args.salted)
         info = {"results": str(path), "complete": doc["complete"], "subset": doc["subset"], **doc["summary"]}
         print(json.dumps(info, indent=2) if args.json else "\n".join(f"{k:24s} {v}" for k, v in info.items()))
         return 0

@@ -39,6 +39,17 @@ from hbmp_bench.metrics.records import AGENT_ERROR, DECISION_CAP, SIM_ERROR, Epi
 BEAT_PERIOD_S = 0.5
 """Least time between two heartbeats sent to the pool [s]."""
 
+EPISODE_IDENTITY = ("episode_key", "episode", "episode_index", "seed", "salt")
+"""Info keys that name the episode (or its record, seed or salt): the env process never sends them
+to the agent, so an agent cannot look up its episode in the public suite and rebuild it (with
+``privileged=True``) in its own process. (The start pose still matches a public episode: only a
+salted evaluation makes a rebuilt one differ from the one it drives, see ``salting``.)"""
+
+
+def agent_view(info: dict) -> dict:
+    """``info`` as the agent may see it: without :data:`EPISODE_IDENTITY`."""
+    return {k: v for k, v in info.items() if k not in EPISODE_IDENTITY}
+
 
 class AgentFailure(Exception):
     """The agent process raised, timed out, died or broke the channel's protocol; the message says which."""
@@ -128,10 +139,10 @@ class _AgentLink:
         return self._exchange(None, channel.READY, self.limits.agent_start_timeout_s, "its start-up")
 
     def reset(self, info: dict) -> None:
-        self._exchange(("reset", info), channel.OK, self.limits.decision_timeout_s, "reset()")
+        self._exchange(("reset", agent_view(info)), channel.OK, self.limits.decision_timeout_s, "reset()")
 
     def act(self, obs: Any, info: dict, decision: int) -> int | tuple[float, ...]:
-        return self._exchange(("act", obs, info), channel.ACTION, self.limits.decision_timeout_s,
+        return self._exchange(("act", obs, agent_view(info)), channel.ACTION, self.limits.decision_timeout_s,
                               f"act() at decision {decision}")
 
 
@@ -206,7 +217,8 @@ def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits
     hooks = rollout.EpisodeHooks(on_reset=lambda obs, info: beat(force=True), check_action=check,
                                  on_step=lambda *step: beat())
     try:
-        run = rollout.run_episode(env, _Numbered(agent, times), seed=task.episode, options={"episode_index": task.episode},
+        options = {"episode_index": task.episode, **({"salt": task.salt} if task.salt else {})}
+        run = rollout.run_episode(env, _Numbered(agent, times), seed=task.episode, options=options,
                                   max_decisions=limits.max_decisions, hooks=hooks)
     except rollout.AgentFailed as exc:
         return outcome(partial_record(env, task, AGENT_ERROR, str(exc)), AGENT_ERROR, False)

@@ -30,6 +30,7 @@ from hbmp_bench.errors import Interrupted, UnknownNameError, UserError
 from hbmp_bench.evaluation.channel import AgentDescription
 from hbmp_bench.evaluation.integrity import RecordsLedger, records_lock
 from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool, describe_agent
+from hbmp_bench.evaluation.salting import SaltKeeper, commitment
 from hbmp_bench.evaluation.tasks import (EpisodeTask, RunnerLimits, agent_slug, is_privileged, suite_tasks,
                                          with_agent_env)
 from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, EpisodeRecord, latest_per_key, repair_records
@@ -52,6 +53,8 @@ class EvaluationResult:
             the evaluator's limits set them): its scores are not comparable with a learned agent's.
         agent_fingerprint: the agent's weights as its description names them (a learned agent's
             ``checkpoint_fingerprint``; "" for an agent without a checkpoint).
+        salt_commitment: SHA-256 (hex) of the evaluation's salt; "" for the public episodes.
+        salt: the salt, once every selected episode is recorded ("" before, and when unsalted).
     """
 
     path: Path
@@ -62,6 +65,8 @@ class EvaluationResult:
     missing: int
     privileged: bool = False
     agent_fingerprint: str = ""
+    salt_commitment: str = ""
+    salt: str = ""
 
     @property
     def sim_errors(self) -> int:
@@ -89,9 +94,9 @@ def _check_workers(workers: int | None) -> None:
         raise UserError(f"workers must be >= 1 (parallel episode slots), got {workers}")
 
 
-def records_path(out_dir: str | os.PathLike, suite: str, agent: str) -> Path:
-    """``<out_dir>/<suite>__<agent slug>.jsonl``."""
-    return Path(out_dir) / f"{suite}__{agent_slug(agent)}.jsonl"
+def records_path(out_dir: str | os.PathLike, suite: str, agent: str, salted: bool = False) -> Path:
+    """``<out_dir>/<suite>__<agent slug>.jsonl`` (``.salted.jsonl`` for a salted evaluation)."""
+    return Path(out_dir) / f"{suite}__{agent_slug(agent)}{'.salted' if salted else ''}.jsonl"
 
 
 def iter_outcomes(
@@ -157,6 +162,7 @@ def evaluate(
     address: str | None = None,
     limits: RunnerLimits | None = None,
     progress: bool = True,
+    salted: bool = False,
 ) -> EvaluationResult:
     """Evaluate ``agent`` on a suite selection, resuming from the records file.
 
@@ -166,6 +172,12 @@ def evaluate(
         workers / backend / address: see ``iter_outcomes``.
         limits: timeouts, watchdog and retries; ``max_decisions`` is refused (capped episodes
             are no evaluation).
+        salted: run the episodes with a secret salt (``salting``): their traffic, pedestrians
+            and light phases cannot be rebuilt outside the evaluator. The salt is made before
+            any agent code runs and kept beside the records (default file
+            ``<suite>__<agent>.salted.jsonl``); ``EvaluationResult.salt_commitment`` names it, and
+            ``EvaluationResult.salt`` reveals it once every selected episode is recorded, after
+            which the records file takes no further episode.
 
     The agent is built once first (in a sandboxed agent process, see ``describe_agent``), so a
     bad name fails before any episode; its env needs and checkpoint fingerprint come from it.
@@ -185,14 +197,20 @@ def evaluate(
     description = describe_agent(agent, limits)
     limits = with_agent_env(limits, description)
     fingerprint = description.fingerprint
-    path = Path(path) if path is not None else records_path(out_dir, selection[0].suite, agent)
+    path = Path(path) if path is not None else records_path(out_dir, selection[0].suite, agent, salted)
     path.parent.mkdir(parents=True, exist_ok=True)
     with records_lock(path):
+        keeper = SaltKeeper(path)  # before any agent code runs: the salt exists, readable by this user only
+        salt = keeper.salt(salted, resuming=path.exists() and path.stat().st_size > 0)
+        selection = [dataclasses.replace(t, salt=salt) for t in selection]
         check_provenance(path, agent, fingerprint, sorted({t.town for t in selection}))
         repair_records(path)
         ledger = RecordsLedger(path)
         finished = {r.key for r in latest_per_key(ledger.records()) if r.end_reason != SIM_ERROR}
         todo = [t for t in selection if t.key not in finished]
+        if salt and todo and keeper.revealed:
+            raise UserError(f"the salt of {path} is revealed, so its episodes could be rebuilt: a salted evaluation "
+                            f"of more episodes goes into another folder (--out)")
         start = time.perf_counter()
         ran = 0
         try:
@@ -204,11 +222,14 @@ def evaluate(
             kept = len(selection) - len(todo) + ran
             raise EvaluationInterrupted(path, kept, len(selection)) from None
         records = ledger.records()
+        done = {r.key for r in records if r.end_reason != SIM_ERROR}
+        revealed = keeper.reveal() if salt and all(t.key in done for t in selection) else ""
     wanted = {t.key: k for k, t in enumerate(selection)}
     records = sorted((r for r in latest_per_key(records) if r.key in wanted), key=lambda r: wanted[r.key])
     return EvaluationResult(path, tuple(records), ran, len(selection) - len(todo), time.perf_counter() - start,
                             len(selection) - len(records), privileged=is_privileged(limits),
-                            agent_fingerprint=fingerprint)
+                            agent_fingerprint=fingerprint, salt_commitment=commitment(salt) if salt else "",
+                            salt=revealed)
 
 
 @functools.cache  # the package does not change under a running process

@@ -412,8 +412,11 @@ def submit(
     limits: RunnerLimits | None = None,
     records_dir: str | os.PathLike | None = None,
     progress: bool = True,
+    salted: bool = False,
 ) -> tuple[Path, dict]:
     """Evaluate ``agent`` on ``suite`` (or a subset), write its results file and regenerate the README.
+    ``salted``: on salted episodes (``evaluate``'s ``salted``); the entry then names the salt's
+    commitment and, once complete, the salt.
 
     The raw records go to ``records_dir`` (default ``runs_dir(board_dir, suite)``), so an
     interrupted submission resumes where it stopped. Returns (results path, results document).
@@ -427,13 +430,14 @@ def submit(
     selection = suite_tasks(spec.name, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity)
     result = evaluate(spec.name, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity,
                       out_dir=records_dir or runs_dir(board_dir, spec.name), workers=workers, backend=backend,
-                      address=address, limits=limits, progress=progress)
+                      address=address, limits=limits, progress=progress, salted=salted)
     doc = results_document(
         spec.name, agent, result.records,
         towns=list(dict.fromkeys(t.town for t in selection)), tasks=list(dict.fromkeys(t.task for t in selection)),
         episodes=sorted({t.episode for t in selection}), fidelity=selection[0].fidelity,
         wall_s=result.wall_s if result.skipped == 0 else None, workers=workers or os.cpu_count(), backend=backend,
         privileged=result.privileged, agent_fingerprint=result.agent_fingerprint,
+        salt_commitment=result.salt_commitment, salt=result.salt,
     )
     snapshot.check_unchanged()
     path = write_json(entry_path(board_dir, spec.name, agent, doc["subset"], doc["fidelity"]), doc)

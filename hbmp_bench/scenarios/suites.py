@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import re
 import zlib
 from typing import TYPE_CHECKING
 
@@ -295,6 +296,26 @@ def _programs_of(town: str, net_hash: str):
 
 def _seed(*parts: object) -> int:
     return zlib.crc32("/".join(map(str, parts)).encode())
+
+
+_SALT = re.compile(r"(?:[0-9a-f]{8}){4,8}")
+
+
+def check_salt(salt: str) -> str:
+    """``salt`` if it is "" (the public episodes) or 16-32 bytes in lowercase hex (a whole number
+    of 32-bit words), else ValueError."""
+    if salt != "" and not (isinstance(salt, str) and _SALT.fullmatch(salt)):
+        raise ValueError("a salt is 32 to 64 lowercase hex digits (a multiple of 8), or '' for the public episodes")
+    return salt
+
+
+def episode_entropy(episode_seed: int, reset_seed: int, salt: str = "") -> list[int]:
+    """The entropy of an episode run's random streams (``DrivingWorld.start``: where background
+    vehicles and pedestrians start and go, SUMO's seed, the light phases): the episode's own seed
+    (:func:`episode_list`), the reset seed and, in a salted evaluation, the salt's 32-bit words.
+    The start, goal and route never depend on it; "" leaves the public episodes as they were."""
+    raw = bytes.fromhex(check_salt(salt))
+    return [int(episode_seed), int(reset_seed), *(int.from_bytes(raw[k:k + 4], "big") for k in range(0, len(raw), 4))]
 
 
 def sample_episode(

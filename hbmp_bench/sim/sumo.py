@@ -424,6 +424,30 @@ class SumoSim:
         """Current signal char (``r``, ``y``, ``g``, ``G`` ...) of one link of a traffic light."""
         return self._api.trafficlight.getRedYellowGreenState(tls)[link_index]
 
+    def light_ids(self) -> tuple[str, ...]:
+        """Every traffic light of the net."""
+        return tuple(self._api.trafficlight.getIDList())
+
+    def shift_light_phases(self, fractions: dict[str, float]) -> None:
+        """Start each traffic light ``tls`` of ``fractions`` that far into its program's cycle
+        (a fraction in [0, 1) of the cycle's length), before the first step: the same fixed-time
+        program, another phase offset. The phase and its remaining time are set; every later
+        phase runs its own duration."""
+        api = self._api.trafficlight
+        for tls, fraction in fractions.items():
+            if not 0.0 <= fraction < 1.0:
+                raise ValueError(f"light phase fraction of {tls} must be in [0, 1), got {fraction}")
+            program = api.getProgram(tls)
+            logic = next(lg for lg in api.getAllProgramLogics(tls) if lg.programID == program)
+            durations = [float(p.duration) for p in logic.phases]
+            into = fraction * sum(durations)
+            for index, duration in enumerate(durations):
+                if into < duration:
+                    break
+                into -= duration
+            api.setPhase(tls, index)
+            api.setPhaseDuration(tls, max(duration - into, self.step_length))
+
     def signal_schedule(self, tls: str, link_index: int, horizon_s: float = 60.0) -> tuple[tuple[float, str], ...]:
         """The signal of one link now and at each change within ``horizon_s`` [s]: ((0, char now),
         (seconds until the next change, new char), ...), read off the traffic light's program
