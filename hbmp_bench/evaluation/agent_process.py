@@ -90,29 +90,55 @@ def _build(spec: str, hint: str = "") -> tuple[Any, str]:
         return None, _error_text(f"{spec!r} could not be built: load_agent") + hint
 
 
-def agent_main(sock: socket.socket, spec: str, lifeline: Connection, limits, environ: dict[str, str] | None = None) -> None:
+def sandbox_entry(argv: list[str] | None = None) -> None:
+    """Entry point of an agent process in the namespace sandbox (``namespaces.start_sandboxed``
+    runs ``python -c`` this with one JSON argument): ``spec`` (the agent's name in records),
+    ``load`` (what ``load_agent`` builds: the spec, a checkpoint's absolute path), ``sys_path``,
+    the descriptors ``channel`` and ``lifeline``, ``limits`` (the ``RunnerLimits`` agent limits)
+    and ``account`` (``[uid, gid]`` to switch to, or null to keep the user)."""
+    import json
+    import types
+
+    config = json.loads((argv or sys.argv)[-1])
+    sys.path[:] = list(config["sys_path"])
+    sock = socket.socket(fileno=int(config["channel"]))
+    lifeline = Connection(int(config["lifeline"]), writable=False)
+    limits = types.SimpleNamespace(agent_user=None, **config["limits"])
+    account = None
+    if config.get("account") is not None:
+        uid, gid = config["account"]
+        account = types.SimpleNamespace(pw_uid=int(uid), pw_gid=int(gid), pw_name=f"agent-{uid}", pw_dir="/tmp")
+    agent_main(sock, config["spec"], lifeline, limits, None, account=account, load=config.get("load"))
+
+
+def agent_main(sock: socket.socket, spec: str, lifeline: Connection, limits, environ: dict[str, str] | None = None,
+               account=None, load: str | None = None) -> None:
     """Entry point of the agent process (started by the episode pool with the caller's ``environ``;
     it exits when ``lifeline`` closes).
 
     An agent whose build runs only the package's code (``runs_only_package_code``) is built
-    inside the sandbox but before the switch to ``agent_user``, so it may read a checkpoint only
-    the caller can read; any other is built after the switch, so none of its code runs as root.
+    inside the sandbox but before the switch to ``agent_user`` (or ``account``, see
+    ``sandbox.enter_sandbox``), so it may read a checkpoint only the caller can read; any other
+    is built after the switch, so none of its code runs as root. ``load`` is what
+    ``load_agent`` builds (default ``spec``).
     """
+    load = load or spec
     from hbmp_bench.evaluation.sandbox import SandboxError, enter_sandbox
     from hbmp_bench.evaluation.tasks import adopt_environment, watch_lifeline
 
     watch_lifeline(lifeline)
     adopt_environment(environ)
-    for name, value in ONE_THREAD.items():
-        os.environ.setdefault(name, value)
+    threads = os.environ.get("OMP_NUM_THREADS", ONE_THREAD["OMP_NUM_THREADS"])
+    for name in ONE_THREAD:  # a caller's OMP_NUM_THREADS sizes the others too (torch reads MKL's when it is set)
+        os.environ.setdefault(name, threads)
     if "torch" in sys.modules:  # imported before the variables were set: its pool is sized already
         sys.modules["torch"].set_num_threads(int(os.environ["OMP_NUM_THREADS"]))
     end = channel.AgentEnd(sock)
     built: list[tuple[Any, str]] = []
-    early = runs_only_package_code(spec)
+    early = runs_only_package_code(load)
     try:
         user = enter_sandbox(limits, keep_fds=(sock.fileno(), lifeline.fileno()),
-                             before_switch=(lambda: built.append(_build(spec))) if early else None)
+                             before_switch=(lambda: built.append(_build(load))) if early else None, account=account)
     except SandboxError as exc:
         end.reply(channel.encode_error(f"the evaluator could not confine the agent process: {exc}"))
         return
@@ -120,7 +146,7 @@ def agent_main(sock: socket.socket, spec: str, lifeline: Connection, limits, env
         hint = "" if user is None else (
             f" (the agent process runs as user {user!r} because the evaluator runs as root: the agent's module and "
             "files must be readable by that user; only a trusted agent may run as root, with agent_user=None)")
-        built.append(_build(spec, hint))
+        built.append(_build(load, hint))
     agent, error = built[0]
     if agent is None:
         end.reply(channel.encode_error(error))

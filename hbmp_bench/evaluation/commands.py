@@ -31,7 +31,7 @@ def _limits(args: argparse.Namespace):
 
     return RunnerLimits(decision_timeout_s=args.decision_timeout, watchdog_s=args.watchdog,
                         agent_memory_mb=unless_0(args.agent_memory_mb), agent_cpu_s=unless_0(args.agent_cpu_s),
-                        agent_user=args.agent_user or None)
+                        agent_user=args.agent_user or None, trust_agent=args.trust_agent)
 
 
 def _add_selection(p: argparse.ArgumentParser, agent_default: str | None) -> None:
@@ -59,6 +59,10 @@ def _add_selection(p: argparse.ArgumentParser, agent_default: str | None) -> Non
     p.add_argument("--agent-user", default=default.agent_user,
                    help=f"when run as root, the unprivileged user the agent process runs as (default "
                         f"{default.agent_user}); '' keeps root: only for trusted agents")
+    p.add_argument("--trust-agent", action="store_true",
+                   help="run an agent that brings its own code or checkpoint without the namespace sandbox (forked, "
+                        "with only its session, limits and --agent-user): only for an agent you trust, or a host "
+                        "without bubblewrap or namespaces, where untrusted agents are otherwise refused (see README)")
     p.add_argument("--salted", action="store_true",
                    help="salted episodes: traffic, pedestrians and light phases take a secret salt, revealed "
                         "when the run is complete (an agent cannot rebuild its episodes; see README)")

@@ -39,6 +39,10 @@ from hbmp_bench.metrics.records import AGENT_ERROR, DECISION_CAP, SIM_ERROR, Epi
 BEAT_PERIOD_S = 0.5
 """Least time between two heartbeats sent to the pool [s]."""
 
+WALL_BUDGET = "wall-clock budget"
+"""How the error of an episode ended by its wall-clock budget begins (``RunnerLimits.episode_wall_factor``;
+its end reason is ``agent_error``: only the agent's answers can stretch an episode that far)."""
+
 EPISODE_IDENTITY = ("episode_key", "episode", "episode_index", "seed", "salt")
 """Info keys that name the episode (or its record, seed or salt): the env process never sends them
 to the agent, so an agent cannot look up its episode in the public suite and rebuild it (with
@@ -108,32 +112,74 @@ def partial_record(env: Any, task: EpisodeTask, end_reason: str, error: str) -> 
                                error=error)
 
 
+def wall_budget_s(task: EpisodeTask, limits: RunnerLimits) -> float:
+    """The episode's wall-clock budget [s]: ``limits.episode_wall_factor`` × its timeout
+    (``Episode.timeout_s``, simulated seconds) + ``limits.episode_wall_extra_s``."""
+    from hbmp_bench.scenarios import suite_episodes
+
+    try:
+        timeout_s = suite_episodes(task.suite, task.town, task.task)[task.episode].timeout_s
+    except Exception:  # noqa: BLE001 - the env reports an unknown episode itself
+        timeout_s = 300.0
+    return limits.episode_wall_factor * timeout_s + limits.episode_wall_extra_s
+
+
 class _AgentLink:
     """The env side of one episode's agent channel: every answer has a timeout, and ``beat`` is
-    called while waiting so the pool's watchdog sees the env process alive."""
+    called while waiting so the pool's watchdog sees the env process alive.
 
-    def __init__(self, end: channel.EnvEnd, limits: RunnerLimits):
+    ``turn`` (a shared byte, or None) is 1 while the agent has the turn (a request sent, its
+    reply not yet read), so the pool can tell an env process killed then from a simulator crash.
+    ``budget_s`` [s]: the episode's wall-clock budget from ``start`` on (None: none); no answer is
+    waited for past it."""
+
+    def __init__(self, end: channel.EnvEnd, limits: RunnerLimits, turn=None, budget_s: float | None = None):
         self.end = end
         self.limits = limits
+        self.turn = turn
+        self.budget_s = budget_s
+        self.ends_at: float | None = None
+        self.exchanges = 0
 
     def _exchange(self, message: tuple | None, expected: str, timeout_s: float, what: str) -> Any:
-        deadline = time.monotonic() + timeout_s  # one allowance for taking the request and answering it
+        now = time.monotonic()
+        if self.ends_at is None and self.budget_s is not None:
+            self.ends_at = now + self.budget_s
+        left = None if self.ends_at is None else self.ends_at - now
+        if left is not None and left <= 0:
+            raise AgentFailure(self._budget_note(what))
+        by_budget = left is not None and left < timeout_s
+        allowance = left if by_budget else timeout_s
+        deadline = now + allowance  # one allowance for taking the request and answering it
+        if self.turn is not None:
+            self.turn.value = 1
         try:
             if message is not None:
-                self.end.request(message, timeout_s)
+                self.end.request(message, allowance)
             reply = self.end.reply(max(deadline - time.monotonic(), 1e-3))
         except channel.ChannelTimeout:
+            if by_budget:
+                raise AgentFailure(self._budget_note(what)) from None
             raise AgentFailure(f"agent did not answer {what} within {timeout_s:g} s (hung, too slow, or not "
                                f"reading its channel); the agent process was stopped") from None
         except channel.ChannelClosed as exc:
             raise AgentFailure(f"agent process exited or closed its channel during {what} ({exc})") from None
         except channel.ProtocolError as exc:
             raise AgentFailure(f"agent broke the channel protocol during {what}: {exc}") from None
+        finally:
+            if self.turn is not None:
+                self.turn.value = 0
+        self.exchanges += 1
         if reply.kind == channel.ERROR:
             raise AgentFailure(reply.value)
         if reply.kind != expected:
             raise AgentFailure(f"agent broke the channel protocol during {what}: sent {reply.kind!r}, want {expected!r}")
         return reply.value
+
+    def _budget_note(self, what: str) -> str:
+        return (f"{WALL_BUDGET}: the episode's wall-clock budget of {self.budget_s:g} s (episode_wall_factor × its "
+                f"timeout + episode_wall_extra_s) was used up, at {what} after {self.exchanges} answers; the agent "
+                f"process was stopped")
 
     def start(self) -> channel.AgentDescription:
         return self._exchange(None, channel.READY, self.limits.agent_start_timeout_s, "its start-up")
@@ -232,7 +278,7 @@ def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits
 
 
 def env_main(pool_conn: Connection, limits: RunnerLimits, lifeline: Connection,
-             environ: dict[str, str] | None = None) -> None:
+             environ: dict[str, str] | None = None, turn=None) -> None:
     """Entry point of the env process (started by the episode pool with the caller's ``environ``;
     it exits when ``lifeline`` closes). It makes itself non-dumpable first, so an agent process
     of the same user can neither trace it nor read its memory."""
@@ -262,7 +308,8 @@ def env_main(pool_conn: Connection, limits: RunnerLimits, lifeline: Connection,
             task, factory, env_kwargs = payload
             end = channel.EnvEnd(channel.socket_from(reduction.recv_handle(pool_conn)), beat, BEAT_PERIOD_S)
             try:
-                done = run_episode(task, env_slot, _AgentLink(end, limits), limits, beat, factory, env_kwargs)
+                link = _AgentLink(end, limits, turn, wall_budget_s(task, limits))
+                done = run_episode(task, env_slot, link, limits, beat, factory, env_kwargs)
             finally:
                 end.close()
             pool_conn.send(("done", done))

@@ -11,7 +11,9 @@ The agent is untrusted: no code of it runs in this process. It is built once in 
 agent process first (``describe_agent``), which also says which env it needs (only known envs
 and observation options are accepted). While the run goes on, the records file must hold
 exactly what this run appended to it (``integrity.RecordsLedger``); a file changed behind the
-evaluator's back raises ``TamperedError``. One evaluation at a time writes a records file
+evaluator's back raises ``TamperedError``. The records file, its provenance and the ledger exist
+before the agent is first built, and a records or provenance file the evaluator did not seal
+(``integrity.RecordsSeal``) is refused rather than resumed. One evaluation at a time writes a records file
 (``integrity.records_lock``): a second one on the same file is refused, naming the first.
 """
 
@@ -28,7 +30,7 @@ from pathlib import Path
 
 from hbmp_bench.errors import Interrupted, UnknownNameError, UserError
 from hbmp_bench.evaluation.channel import AgentDescription
-from hbmp_bench.evaluation.integrity import RecordsLedger, records_lock
+from hbmp_bench.evaluation.integrity import RecordsLedger, RecordsSeal, TamperedError, quarantine, records_lock
 from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool, describe_agent
 from hbmp_bench.evaluation.salting import SaltKeeper, commitment
 from hbmp_bench.evaluation.tasks import (EpisodeTask, RunnerLimits, agent_slug, is_privileged, suite_tasks,
@@ -194,18 +196,42 @@ def evaluate(
         raise UnknownNameError("backend", backend, BACKENDS)
     _check_workers(workers)
     selection = suite_tasks(suite, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity)
-    description = describe_agent(agent, limits)
-    limits = with_agent_env(limits, description)
-    fingerprint = description.fingerprint
+    from hbmp_bench.agents import AGENTS
+
+    if agent not in AGENTS and not agent.endswith(".pt") and ":" not in agent:  # as load_agent says, before any file
+        raise UnknownNameError("agent", agent, [*AGENTS, "<module:Class>", "<path/to/checkpoint.pt>"])
     path = Path(path) if path is not None else records_path(out_dir, selection[0].suite, agent, salted)
     path.parent.mkdir(parents=True, exist_ok=True)
     with records_lock(path):
         keeper = SaltKeeper(path)  # before any agent code runs: the salt exists, readable by this user only
         salt = keeper.salt(salted, resuming=path.exists() and path.stat().st_size > 0)
         selection = [dataclasses.replace(t, salt=salt) for t in selection]
-        check_provenance(path, agent, fingerprint, sorted({t.town for t in selection}))
+        # before any agent code runs: only records this evaluator sealed are resumed, and the
+        # records file, its provenance and the ledger exist and are noted
+        side = provenance_path(path)
+        seal = RecordsSeal(path, side)
+        seal.check_resumable()
         repair_records(path)
+        created = not path.exists()
+        if created:
+            os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
         ledger = RecordsLedger(path)
+        noted_side = side.read_bytes() if side.exists() else None
+        try:
+            description = describe_agent(agent, limits)  # the agent's code runs (in its sandbox) from here on
+        except BaseException:
+            if created and path.exists() and path.stat().st_size == 0:  # a bad agent leaves no records file
+                path.unlink()
+            raise
+        ledger.verified()
+        if (side.read_bytes() if side.exists() else None) != noted_side:
+            moved = quarantine(side)
+            raise TamperedError(f"{side} changed while the agent was built: something other than the evaluator wrote "
+                                f"it{f' (moved to {moved.name})' if moved else ''}; evaluate again")
+        limits = with_agent_env(limits, description)
+        fingerprint = description.fingerprint
+        check_provenance(path, agent, fingerprint, sorted({t.town for t in selection}))
+        seal.write()
         finished = {r.key for r in latest_per_key(ledger.records()) if r.end_reason != SIM_ERROR}
         todo = [t for t in selection if t.key not in finished]
         if salt and todo and keeper.revealed:
@@ -217,6 +243,7 @@ def evaluate(
             for outcome in iter_outcomes(todo, workers=workers, backend=backend, address=address, limits=limits,
                                          progress=progress, descriptions={agent: description}):
                 ledger.append(outcome.record)
+                seal.write()
                 ran += 1
         except KeyboardInterrupt:  # the pool has ended its processes on the way out
             kept = len(selection) - len(todo) + ran
@@ -230,6 +257,11 @@ def evaluate(
                             len(selection) - len(records), privileged=is_privileged(limits),
                             agent_fingerprint=fingerprint, salt_commitment=commitment(salt) if salt else "",
                             salt=revealed)
+
+
+def provenance_path(path: Path) -> Path:
+    """``<records>.provenance.json``: what produced the records (see ``check_provenance``)."""
+    return path.with_name(path.name + ".provenance.json")
 
 
 @functools.cache  # the package does not change under a running process
@@ -262,7 +294,7 @@ def check_provenance(path: Path, agent: str, fingerprint: str, towns: Sequence[s
 
     current = {"code": code_fingerprint(), "agent": fingerprint,
                "maps": {town: map_hash(town) for town in towns if town not in TOWNS}}
-    side = path.with_name(path.name + ".provenance.json")
+    side = provenance_path(path)
     known = json.loads(side.read_text()) if side.exists() else None
     if known is None and path.exists() and path.stat().st_size > 0:
         raise UserError(f"{path} holds episodes of unknown provenance (no {side.name}): evaluate into another "

@@ -16,17 +16,28 @@ rather than both appending and the ledger reporting the other's records as tampe
 A file found changed is moved aside to ``<name>.tampered`` (never deleted), so neither
 ``hbmp-bench report``, a resumed evaluation nor the leaderboard picks up what it holds.
 
-It cannot vouch for records written before the run began (a resumed file): those are as
-trustworthy as the runs that wrote them.
+Records the evaluator resumes from must be its own (``RecordsSeal``): after creating the records
+file and after every record it appends, it writes ``<records>.seal``, an HMAC (with a key of the
+evaluating user's, ``records_key``, that no agent sandbox shows) of the records' bytes and of the
+provenance side file. A records or provenance file without a valid seal — written by an agent
+while it was built, by another user, or by hand — is refused rather than resumed; bytes past the
+sealed length (a record in flight when a run was killed) are cut. The records file, its
+provenance and its ledger exist before any agent code runs (``evaluate``). A seal vouches for
+what this user's evaluator wrote: an agent trusted to run as that same user (``--trust-agent``,
+not root) can read the key, so it proves nothing against such an agent.
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
+import hmac
+import json
 import os
+import secrets
 from pathlib import Path
 
+from hbmp_bench.errors import UserError
 from hbmp_bench.locks import Busy, exclusive_lock
 from hbmp_bench.metrics.records import EpisodeRecord, append_record, parse_records, record_line
 
@@ -132,3 +143,102 @@ class BoardSnapshot:
                 f"under evaluation can, when it runs as your user (or another submission ran at the same time). "
                 f"Nothing was written{'; moved aside: ' + ', '.join(moved) if moved else ''}. Check those files "
                 f"(rename one back if it was yours), then submit again (finished episodes are kept).")
+
+
+SEAL_FORMAT = "hbmp_bench.records-seal.v1"
+
+
+class UnsealedRecordsError(UserError):
+    """A records or provenance file the evaluator did not seal: it is refused, not resumed."""
+
+
+def records_key() -> bytes:
+    """The evaluating user's secret key for records seals (32 random bytes), created on first use
+    in ``$XDG_CONFIG_HOME/hbmp-bench/records.key`` (default ``~/.config``), readable by that user
+    only. The agent sandbox does not show it."""
+    base = Path(os.environ.get("XDG_CONFIG_HOME") or Path.home() / ".config")
+    folder = base / "hbmp-bench"
+    folder.mkdir(mode=0o700, parents=True, exist_ok=True)
+    path = folder / "records.key"
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_NOFOLLOW, 0o600)
+    except FileExistsError:
+        data = path.read_bytes()
+        if len(data) != 32:
+            raise UserError(f"{path} is not a records key (32 bytes): delete it to make a new one "
+                            "(records sealed with it can then no longer be resumed)") from None
+        return data
+    with os.fdopen(fd, "wb") as fh:
+        fh.write(secrets.token_bytes(32))
+    return path.read_bytes()
+
+
+class RecordsSeal:
+    """The seal ``<records>.seal`` of a records file and its provenance side file.
+
+    Args:
+        path: the records file.
+        side: its provenance side file (``<records>.provenance.json``).
+        key: the HMAC key (default ``records_key()``).
+    """
+
+    def __init__(self, path: str | os.PathLike, side: str | os.PathLike, key: bytes | None = None):
+        self.path, self.side = Path(path), Path(side)
+        self.seal_path = self.path.with_name(self.path.name + ".seal")
+        self.key = records_key() if key is None else key
+
+    def _mac(self, records: bytes, provenance: bytes | None) -> str:
+        message = b"\0".join([SEAL_FORMAT.encode(), hashlib.sha256(records).hexdigest().encode(),
+                               b"-" if provenance is None else hashlib.sha256(provenance).hexdigest().encode()])
+        return hmac.new(self.key, message, hashlib.sha256).hexdigest()
+
+    def write(self) -> None:
+        """Seal the records file's and the side file's current bytes (atomic replace)."""
+        records = self.path.read_bytes() if self.path.exists() else b""
+        provenance = self.side.read_bytes() if self.side.exists() else None
+        doc = {"format": SEAL_FORMAT, "size": len(records), "mac": self._mac(records, provenance)}
+        tmp = self.seal_path.with_name(self.seal_path.name + ".tmp")
+        tmp.write_text(json.dumps(doc) + "\n")
+        os.replace(tmp, self.seal_path)
+
+    def check_resumable(self) -> int:
+        """Before any agent code runs: refuse records this evaluator did not seal.
+
+        Nothing there (or an empty records file alone): fine. Else the seal must hold: the
+        provenance's bytes and the records' first ``size`` bytes are what was sealed; bytes past
+        them (a record appended when the run was killed) are cut. Returns the bytes cut; raises
+        ``UnsealedRecordsError`` naming the files otherwise.
+        """
+        records = self.path.read_bytes() if self.path.exists() else b""
+        provenance = self.side.read_bytes() if self.side.exists() else None
+        if not records and provenance is None and not self.seal_path.exists():
+            return 0
+        why = self._unsealed(records, provenance)
+        if why:
+            names = ", ".join(p.name for p in (self.path, self.side, self.seal_path) if p.exists())
+            raise UnsealedRecordsError(
+                f"{self.path} is not records this evaluator wrote ({why}): it may have been written by an agent "
+                f"while it was built, by another user or by hand, and is not resumed. Evaluate into another folder "
+                f"(--out), or delete {names} to start over")
+        size = json.loads(self.seal_path.read_text())["size"]
+        if len(records) > size:
+            with open(self.path, "rb+") as fh:
+                fh.truncate(size)
+                fh.flush()
+                os.fsync(fh.fileno())
+        return len(records) - size
+
+    def _unsealed(self, records: bytes, provenance: bytes | None) -> str:
+        try:
+            doc = json.loads(self.seal_path.read_text())
+        except FileNotFoundError:
+            return f"no {self.seal_path.name}"
+        except (OSError, ValueError) as exc:
+            return f"{self.seal_path.name} unreadable: {exc}"
+        if not isinstance(doc, dict) or doc.get("format") != SEAL_FORMAT or not isinstance(doc.get("size"), int) \
+                or not isinstance(doc.get("mac"), str):
+            return f"{self.seal_path.name} is not a seal"
+        size = doc["size"]
+        if size > len(records) or not hmac.compare_digest(doc["mac"], self._mac(records[:size], provenance)):
+            return f"its seal does not match the records and provenance (sealed with another key, or changed since)"
+        return ""

@@ -12,7 +12,9 @@ hands out one episode at a time per slot, watches heartbeats, and
   dies, or breaks the channel's protocol (its exit status is added to the error);
 - kills a slot whose env process sends no heartbeat for ``watchdog_s`` (``start_timeout_s``
   right after it starts) or dies, and retries that episode up to ``retries`` times before
-  recording a ``sim_error``.
+  recording a ``sim_error``; the record it ends with names every earlier attempt (``RETRIED``);
+- records an ``agent_error``, not retried, when the env process died or stalled while the agent
+  had the turn (the simulator idle, waiting for its answer): an agent that kills or stops it.
 
 Outcomes are yielded as episodes finish, so a caller can append each record at once.
 """
@@ -24,6 +26,7 @@ import multiprocessing as mp
 import os
 import signal
 import socket
+import sys
 import time
 from collections import deque
 from collections.abc import Iterable, Iterator, Mapping
@@ -34,10 +37,15 @@ from multiprocessing.connection import Connection, wait
 from hbmp_bench.errors import UserError
 from hbmp_bench.evaluation import channel
 from hbmp_bench.evaluation.agent_process import agent_main
+from hbmp_bench.evaluation.namespaces import (AgentUidLease, SandboxedProcess, SandboxUnavailable, agent_files,
+                                              mounted_paths, sandbox_problem, start_sandboxed)
 from hbmp_bench.evaluation.env_process import blank_record, env_main
 from hbmp_bench.evaluation.sandbox import agent_account, kill_session, protect_process, reap_orphans
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, with_agent_env
 from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, EpisodeRecord
+
+RETRIED = "retried"
+"""How the note on a record of an episode that took more than one attempt begins (in its ``error``)."""
 
 POLL_S = 0.2
 """How often the pool checks watchdogs while no message arrives [s]."""
@@ -97,15 +105,80 @@ def sandbox_context(start_method: str | None, limits: RunnerLimits, agent: str |
     return ctx
 
 
-def start_agent(ctx, agent: str, sock: socket.socket, life_r: Connection, limits: RunnerLimits):
-    """Start an agent process for ``agent`` on its end ``sock`` of a channel (closed here once passed)."""
-    proc = ctx.Process(target=agent_main, args=(sock, agent, life_r, limits, dict(os.environ)), name="hbmp-agent")
+SANDBOX = "sandbox"
+FORKED = "forked"
+"""How an agent process is isolated: in the namespace sandbox (``namespaces``: a fresh
+interpreter in bubblewrap), or forked by the fork server and confined by ``sandbox`` alone."""
+
+
+def isolation(agent: str, limits: RunnerLimits) -> str:
+    """``SANDBOX`` or ``FORKED`` for ``agent``'s processes.
+
+    An agent that brings its own code or data (``module:Class``, a checkpoint file) runs in the
+    namespace sandbox, unless ``limits.trust_agent``; the package's registered agents (its own
+    code and shipped checkpoints) are forked, which keeps their start fast. Raises
+    ``SandboxUnavailable`` for an agent that needs the sandbox on a host that cannot give it,
+    saying why and what to do.
+    """
+    from hbmp_bench.agents import AGENTS
+
+    if limits.trust_agent or agent in AGENTS:
+        return FORKED
+    problem = sandbox_problem()
+    if problem:
+        raise SandboxUnavailable(
+            f"agent {agent!r} brings its own code or data, and untrusted agents run only in the namespace sandbox, "
+            f"which this host cannot give: {problem}. Install bubblewrap (and allow user namespaces, or run the "
+            "evaluator as root), or, only for an agent you trust, pass --trust-agent (RunnerLimits(trust_agent=True)):"
+            " it then runs as the evaluator's user (as root: as --agent-user) and can read and write what that "
+            "user can")
+    return SANDBOX
+
+
+def agent_sys_path(mounted: list[str]) -> list[str]:
+    """The entries of this process's ``sys.path`` inside one of the ``mounted`` paths (the
+    agent process's ``sys.path`` in the sandbox)."""
+    out = []
+    for entry in sys.path:
+        full = os.path.abspath(entry) if entry else ""
+        if full and any(full == m or full.startswith(m.rstrip("/") + "/") for m in mounted) and full not in out:
+            out.append(full)
+    return out
+
+
+def start_agent(ctx, agent: str, sock: socket.socket, life_r: Connection, limits: RunnerLimits,
+                lease: AgentUidLease | None = None):
+    """Start an agent process for ``agent`` on its end ``sock`` of a channel (closed here once
+    passed): in the namespace sandbox (``isolation``; as uid ``lease`` when the evaluator is
+    root), or forked by ``ctx``'s fork server."""
     try:
+        if isolation(agent, limits) == SANDBOX:
+            load = os.path.abspath(agent) if agent.endswith(".pt") else agent
+            readable = [*agent_files(agent), *limits.agent_readable]
+            config = {"spec": agent, "load": load, "sys_path": agent_sys_path(mounted_paths(readable)),
+                      "channel": sock.fileno(), "lifeline": life_r.fileno(),
+                      "limits": {k: getattr(limits, k) for k in AGENT_LIMITS},
+                      "account": None if lease is None else [lease.uid, lease.gid]}
+            return start_sandboxed(config, (sock.fileno(), life_r.fileno()), readable=readable,
+                                   writable=limits.agent_writable, extra_env=limits.agent_env,
+                                   tmp_mb=limits.agent_file_mb)
+        proc = ctx.Process(target=agent_main, args=(sock, agent, life_r, limits, dict(os.environ)), name="hbmp-agent")
         proc.start()
     finally:
         sock.close()
     _LIVE.add(proc.pid)
     return proc
+
+
+AGENT_LIMITS = ("agent_memory_mb", "agent_cpu_s", "agent_file_mb", "agent_processes")
+"""The ``RunnerLimits`` the agent process applies to itself (``sandbox.enter_sandbox``)."""
+
+
+def uid_lease_for(agent: str, limits: RunnerLimits) -> AgentUidLease | None:
+    """A uid of its own for ``agent``'s sandboxed processes when this process is root, else None."""
+    if os.geteuid() != 0 or isolation(agent, limits) != SANDBOX:
+        return None
+    return AgentUidLease()
 
 
 def fork_server_pid() -> int | None:
@@ -121,6 +194,9 @@ def end_agent(proc, wait_s: float = 0.0) -> int | None:
     (None when it was still running after ``wait_s`` [s])."""
     proc.join(wait_s)
     code = proc.exitcode
+    if isinstance(proc, SandboxedProcess):  # its PID namespace ends with it
+        proc.kill()
+        return code
     kill_session(proc.pid)
     proc.join(1.0)
     if proc.is_alive():  # killed before it had a session of its own
@@ -158,9 +234,18 @@ def describe_agent(agent: str, limits: RunnerLimits | None = None, start_method:
     runs in the caller. Raises ``AgentBuildError`` with the agent's error otherwise."""
     limits = limits or RunnerLimits()
     ctx = sandbox_context(start_method, limits, agent)
+    lease = uid_lease_for(agent, limits)
+    try:
+        return _describe(ctx, agent, limits, lease)
+    finally:
+        if lease is not None:
+            lease.release()
+
+
+def _describe(ctx, agent: str, limits: RunnerLimits, lease: AgentUidLease | None) -> channel.AgentDescription:
     env_sock, agent_sock = socket.socketpair()
     life_r, life_w = ctx.Pipe(duplex=False)
-    proc = start_agent(ctx, agent, agent_sock, life_r, limits)
+    proc = start_agent(ctx, agent, agent_sock, life_r, limits, lease)
     life_r.close()
     end = channel.EnvEnd(env_sock)
     code = None
@@ -203,13 +288,16 @@ class _Slot:
     """An env process (started on first use, restarted after simulation failures) and the agent
     process of the episode it runs."""
 
-    def __init__(self, ctx, limits: RunnerLimits):
+    def __init__(self, ctx, limits: RunnerLimits, leases: dict | None = None):
         self.ctx, self.limits = ctx, limits
+        self.leases = {} if leases is None else leases
+        """The pool's uid leases by agent (``uid_lease_for``), shared by its slots."""
         self.env_proc = self.agent_proc = None
         self.conn: Connection | None = None
         self.lifeline: Connection | None = None
         self.life_r: Connection | None = None
         self.task: EpisodeTask | None = None
+        self.turn = None
         self.last_seen = 0.0
         self.heard_from = False
 
@@ -221,8 +309,9 @@ class _Slot:
         pool_end, env_pool_end = self.ctx.Pipe(duplex=True)
         self.life_r, self.lifeline = self.ctx.Pipe(duplex=False)
         environ = dict(os.environ)  # a fork server's children would otherwise see its start-time environment
-        self.env_proc = self.ctx.Process(target=env_main, args=(env_pool_end, self.limits, self.life_r, environ),
-                                         name="hbmp-env")
+        self.turn = self.ctx.Value("b", 0, lock=False)  # 1 while the agent has the turn (see env_process._AgentLink)
+        self.env_proc = self.ctx.Process(target=env_main, args=(env_pool_end, self.limits, self.life_r, environ,
+                                                                self.turn), name="hbmp-env")
         self.env_proc.start()
         _LIVE.add(self.env_proc.pid)
         self.heard_from = False
@@ -239,7 +328,10 @@ class _Slot:
         self.last_seen = time.monotonic()
         env_sock, agent_sock = socket.socketpair()
         try:
-            self.agent_proc = start_agent(self.ctx, task.agent, agent_sock, self.life_r, self.limits)
+            if task.agent not in self.leases:
+                self.leases[task.agent] = uid_lease_for(task.agent, self.limits)
+            self.agent_proc = start_agent(self.ctx, task.agent, agent_sock, self.life_r, self.limits,
+                                          self.leases[task.agent])
             self.conn.send(("run", (task, env.env_factory, env.env_kwargs)))
             reduction.send_handle(self.conn, env_sock.fileno(), self.env_proc.pid)
         except OSError:
@@ -273,6 +365,10 @@ class _Slot:
             _LIVE.discard(self.env_proc.pid)
         self.env_proc = self.conn = self.lifeline = self.life_r = None
         self.task = None
+
+    def agents_turn(self) -> bool:
+        """Whether the env process was waiting for the agent's answer (read from the shared byte)."""
+        return self.turn is not None and self.turn.value == 1
 
     def silent_for(self, now: float) -> float | None:
         """The allowance [s] this slot has gone past without a message, or None while within it."""
@@ -319,6 +415,8 @@ class EpisodePool:
         self.limits = limits or RunnerLimits()
         self.ctx = sandbox_context(start_method, self.limits)
         self._slots: list[_Slot] = []
+        self._leases: dict[str, AgentUidLease | None] = {}
+        self._failed_attempts: dict[EpisodeTask, list[str]] = {}
         self._envs: dict[str, RunnerLimits | str] = {}
         for agent, description in (descriptions or {}).items():
             self._envs[agent] = self._env_of(description)
@@ -348,6 +446,10 @@ class EpisodePool:
         for slot in self._slots:
             slot.stop(graceful=True)
         self._slots = []
+        for lease in self._leases.values():
+            if lease is not None:
+                lease.release()
+        self._leases.clear()
 
     def imap(self, tasks: Iterable[EpisodeTask]) -> Iterator[EpisodeOutcome]:
         """Run ``tasks``; yields one outcome per task in finishing order."""
@@ -358,7 +460,7 @@ class EpisodePool:
         if self.ctx.get_start_method() == "forkserver":  # takes effect if no fork server runs yet
             self.ctx.set_forkserver_preload(list(preload_for(pending[0].agent, self.limits)))
         while len(self._slots) < min(self.workers, len(pending)):
-            self._slots.append(_Slot(self.ctx, self.limits))
+            self._slots.append(_Slot(self.ctx, self.limits, self._leases))
         while pending or any(s.task is not None for s in self._slots):
             for slot in self._slots:
                 while slot.task is None and pending:
@@ -375,10 +477,13 @@ class EpisodePool:
                 try:
                     kind, payload = conn.recv()
                 except (EOFError, OSError):
-                    task = slot.task
+                    task, agents_turn = slot.task, slot.agents_turn()
                     reason = f"env process died ({slot.exit_codes()})"
                     slot.stop(graceful=False)
-                    yield from self._sim_failure(task, reason, attempts, pending)
+                    if agents_turn:
+                        yield self._agents_fault(task, reason, attempts)
+                    else:
+                        yield from self._sim_failure(task, reason, attempts, pending)
                     continue
                 slot.last_seen = time.monotonic()
                 slot.heard_from = True
@@ -395,20 +500,45 @@ class EpisodePool:
                     record = EpisodeRecord(**payload["record"])
                     if failed and code:
                         record = dataclasses.replace(record, error=f"{record.error}\n({exit_note(code, self.limits)})")
+                    record = self._with_attempts(record, task)
                     yield EpisodeOutcome(record, attempts[task], payload["max_decision_s"], payload["mean_decision_s"])
             now = time.monotonic()
             for slot in self._slots:
                 allowance = slot.silent_for(now) if slot.task is not None else None
                 if allowance is not None:
-                    task = slot.task
+                    task, agents_turn = slot.task, slot.agents_turn()
                     what = "no progress from the simulation" if slot.heard_from else "the env process did not start"
                     slot.stop(graceful=False)
                     reason = f"watchdog: {what} for {allowance:g} s; env process killed"
-                    yield from self._sim_failure(task, reason, attempts, pending)
+                    if agents_turn:
+                        yield self._agents_fault(task, reason, attempts)
+                    else:
+                        yield from self._sim_failure(task, reason, attempts, pending)
+
+    def _agents_fault(self, task: EpisodeTask, reason: str, attempts: dict) -> EpisodeOutcome:
+        """The env process died or stalled while the agent had the turn: the simulator was idle,
+        waiting for the agent's answer, so the agent (which may have killed or stopped it) fails
+        the episode; it is not retried."""
+        error = (f"{reason} while the agent had the turn (waiting for its answer, the simulator was idle): "
+                 "the episode is the agent's failure, not retried")
+        return EpisodeOutcome(self._with_attempts(blank_record(task, AGENT_ERROR, error), task), attempts[task],
+                              0.0, 0.0)
+
+    def _with_attempts(self, record: EpisodeRecord, task: EpisodeTask) -> EpisodeRecord:
+        """``record`` with the earlier attempts of its episode (simulator failures that were
+        retried) added to its ``error``, so a retry is never silent."""
+        earlier = self._failed_attempts.pop(task, [])
+        if not earlier:
+            return record
+        lines = [f"attempt {k} of {len(earlier) + 1}: {why}" for k, why in enumerate(earlier, start=1)]
+        note = f"{RETRIED}: recorded from attempt {len(earlier) + 1}; " + "; ".join(lines)
+        return dataclasses.replace(record, error=f"{record.error}\n{note}" if record.error else note)
 
     def _sim_failure(self, task: EpisodeTask, reason: str, attempts: dict, pending: deque) -> Iterator[EpisodeOutcome]:
-        """Retry ``task`` (at the front of the queue) or, out of retries, yield its sim_error record."""
+        """Retry ``task`` (at the front of the queue; the record it ends with names this attempt)
+        or, out of retries, yield its sim_error record (naming every attempt)."""
         if attempts[task] <= self.limits.retries:
+            self._failed_attempts.setdefault(task, []).append(" ".join(reason.split())[:500])
             pending.appendleft(task)
             return
-        yield EpisodeOutcome(blank_record(task, SIM_ERROR, reason), attempts[task], 0.0, 0.0)
+        yield EpisodeOutcome(self._with_attempts(blank_record(task, SIM_ERROR, reason), task), attempts[task], 0.0, 0.0)

@@ -1,5 +1,9 @@
 """The agent sandbox: what an agent process gives up before the agent's code runs, and how the pool ends it.
 
+Agents that bring their own code or data also run in the namespace sandbox (``namespaces``:
+bubblewrap), which holds what follows too; this module is all a trusted agent
+(``RunnerLimits.trust_agent``, the package's registered agents) gets.
+
 An agent under evaluation is untrusted code. Before its process imports or builds the agent
 (``enter_sandbox``), it
 
@@ -104,7 +108,8 @@ def agent_account(user: str | None) -> pwd.struct_passwd | None:
     return account
 
 
-def enter_sandbox(limits: Any, keep_fds: Iterable[int], before_switch: Callable[[], None] | None = None) -> str | None:
+def enter_sandbox(limits: Any, keep_fds: Iterable[int], before_switch: Callable[[], None] | None = None,
+                  account: Any = None) -> str | None:
     """Confine this (agent) process as the module docstring says, before any agent code runs.
 
     Args:
@@ -114,6 +119,9 @@ def enter_sandbox(limits: Any, keep_fds: Iterable[int], before_switch: Callable[
         before_switch: called once confined but before the user switch (building an agent whose
             build runs only the package's code, from files only the caller can read); called
             whether or not the user is switched.
+        account: the account to switch to (``pw_uid``, ``pw_gid``, ``pw_name``, ``pw_dir``), in
+            place of ``limits.agent_user``'s: the uid of its own an evaluation run by root gives
+            the agents it runs in the namespace sandbox (``namespaces.AgentUidLease``).
 
     Returns the user the process switched to (None: it kept the caller's). Raises
     ``SandboxError`` when a step that was asked for fails.
@@ -127,7 +135,8 @@ def enter_sandbox(limits: Any, keep_fds: Iterable[int], before_switch: Callable[
     os.dup2(2, 1)
     close_inherited_fds(keep_fds)
     _prctl(PR_SET_NO_NEW_PRIVS, 1)
-    account = agent_account(limits.agent_user)
+    if account is None:
+        account = agent_account(limits.agent_user)
     _set_limit(resource.RLIMIT_CORE, 0)
     if limits.agent_memory_mb is not None:
         _set_limit(resource.RLIMIT_AS, limits.agent_memory_mb * _MIB)
@@ -163,8 +172,9 @@ USER_DIRS = ("XDG_DATA_HOME", "XDG_CONFIG_HOME", "XDG_CACHE_HOME", "XDG_STATE_HO
 """Environment variables naming per-user folders: dropped when the agent's user cannot reach them."""
 
 
-def switch_user(account: pwd.struct_passwd) -> None:
-    """Become ``account`` (its uid and primary gid, no supplementary groups) for good, and check
+def switch_user(account: Any) -> None:
+    """Become ``account`` (a ``pwd.struct_passwd`` or an object with its ``pw_uid``, ``pw_gid``,
+    ``pw_name`` and ``pw_dir``: its uid and primary gid, no supplementary groups) for good, and check
     that root cannot be regained. ``HOME``, ``USER`` and ``LOGNAME`` become the account's (as
     ``su`` does); ``USER_DIRS`` variables it cannot reach are removed."""
     os.environ.update(HOME=account.pw_dir, USER=account.pw_name, LOGNAME=account.pw_name)

@@ -83,6 +83,24 @@ class RunnerLimits:
         agent_preload: modules the fork server imports once, so that an agent process, started
             for every episode, finds them loaded (e.g. a heavy library the agent imports). They
             run in the evaluator's fork server: name trusted libraries only, never the agent's.
+            (Agents in the namespace sandbox start a fresh interpreter and import what they need.)
+        trust_agent: run agents that bring their own code (``module:Class``, a checkpoint file)
+            without the namespace sandbox (``namespaces``), in a process forked by the fork
+            server with only the session, resource limits and ``agent_user`` of ``sandbox``: for
+            trusted agents, and hosts that cannot give namespaces. False (the default): such
+            agents run in the sandbox, and are refused where the host cannot give one.
+        agent_env: names of variables of the evaluator's environment the agent process gets
+            besides ``namespaces.AGENT_ENVIRONMENT`` (sandbox only; without the sandbox it gets
+            the whole environment).
+        agent_readable / agent_writable: folders (or files) the sandbox shows the agent
+            read-only / writable, at their own paths, besides what it always shows (its
+            Python, this package, its own module's folder or checkpoint file). Never name the
+            records or leaderboard folders writable.
+        episode_wall_factor / episode_wall_extra_s: every episode must end within
+            ``episode_wall_factor`` × its timeout (``Episode.timeout_s``, simulated seconds) +
+            ``episode_wall_extra_s`` of wall-clock time [s], counted from the agent's start-up
+            on; past it the episode ends as ``agent_error`` naming the budget (an agent that
+            takes nearly ``decision_timeout_s`` at every decision cannot stretch it further).
 
     Every episode starts a fresh agent process, so the agent limits hold per episode.
     """
@@ -101,6 +119,12 @@ class RunnerLimits:
     agent_processes: int | None = 512
     agent_user: str | None = "nobody"
     agent_preload: tuple[str, ...] = ()
+    trust_agent: bool = False
+    agent_env: tuple[str, ...] = ()
+    agent_readable: tuple[str, ...] = ()
+    agent_writable: tuple[str, ...] = ()
+    episode_wall_factor: float = 4.0
+    episode_wall_extra_s: float = 120.0
 
     def __post_init__(self):
         for name in ("decision_timeout_s", "agent_start_timeout_s", "start_timeout_s", "watchdog_s"):
@@ -113,6 +137,20 @@ class RunnerLimits:
         if self.agent_user is not None and (not isinstance(self.agent_user, str) or not self.agent_user.strip()):
             raise ValueError(f"agent_user must be a user name or None, got {self.agent_user!r}")
         object.__setattr__(self, "agent_preload", tuple(self.agent_preload))
+        if not isinstance(self.trust_agent, bool):
+            raise ValueError(f"trust_agent must be True or False, got {self.trust_agent!r}")
+        for name in ("agent_env", "agent_readable", "agent_writable"):
+            value = getattr(self, name)
+            if isinstance(value, str) or not all(isinstance(v, str) and v for v in value):
+                raise ValueError(f"{name} must be a sequence of non-empty strings, got {value!r}")
+            object.__setattr__(self, name, tuple(value))
+        for name in ("agent_readable", "agent_writable"):
+            relative = [p for p in getattr(self, name) if not os.path.isabs(p)]
+            if relative:
+                raise ValueError(f"{name} must name absolute paths, got {relative}")
+        if not self.episode_wall_factor > 0 or not self.episode_wall_extra_s >= 0:
+            raise ValueError(f"episode_wall_factor must be > 0 and episode_wall_extra_s >= 0, got "
+                             f"{self.episode_wall_factor} and {self.episode_wall_extra_s}")
         bad = [m for m in self.agent_preload if not isinstance(m, str) or not m.replace(".", "").replace("_", "").isalnum()]
         if bad:
             raise ValueError(f"agent_preload must name modules (a.b.c), got {bad}")

@@ -14,7 +14,10 @@ A checkpoint is a dict:
     train                the training options and the command that produced it
 
 Only str, int, float, bool, None, lists and dicts of them, and tensors go in, so the file loads
-under ``weights_only=True``. torch is imported by the functions that need it, so that ``KINDS``
+under ``weights_only=True``. A model config names the classes that build the network
+(``class_name``, resolved by rsl-rl): a loaded checkpoint may name only ``NETWORK_CLASSES``, the
+package's own network and distributions, so that building a policy never imports or runs a module
+the file's author chose (``check_network_classes``). torch is imported by the functions that need it, so that ``KINDS``
 (the command line's choices) costs nothing to import.
 """
 
@@ -31,6 +34,13 @@ from hbmp_bench.errors import UserError
 CHECKPOINT_FORMAT = "hbmp_bench.checkpoint.v1"
 KINDS = ("il", "hbmp", "hbmp-s", "flat")
 PLAIN_TYPES = (str, int, float, bool, type(None))
+NETWORK_CLASSES = (
+    "hbmp_bench.training.models:BehaviorNetwork",
+    "hbmp_bench.training.distributions:CategoricalDistribution",
+    "rsl_rl.modules.distribution:GaussianDistribution",
+)
+"""The only ``class_name`` values a checkpoint's model config may hold: the paper's network, its
+categorical output and the Gaussian output of the flat baseline (what ``training.models`` writes)."""
 
 
 def _check_plain(value: Any, where: str) -> None:
@@ -108,7 +118,39 @@ def load_checkpoint(path: str, kinds: tuple[str, ...] = KINDS) -> dict[str, Any]
         raise CheckpointError(f"{path!r} is not an hbmp_bench checkpoint (format {CHECKPOINT_FORMAT})")
     if checkpoint.get("kind") not in kinds:
         raise CheckpointError(f"{path!r} holds a {checkpoint.get('kind')!r} policy; expected one of {kinds}")
+    check_network_classes(checkpoint, path)
     return checkpoint
+
+
+def _class_names(value: Any, where: str):
+    """(where, value) of every ``class_name`` entry in nested dicts and lists."""
+    if isinstance(value, dict):
+        for k, v in value.items():
+            if k == "class_name":
+                yield f"{where}.class_name", v
+            else:
+                yield from _class_names(v, f"{where}.{k}")
+    elif isinstance(value, (list, tuple)):
+        for k, v in enumerate(value):
+            yield from _class_names(v, f"{where}[{k}]")
+
+
+def check_network_classes(checkpoint: dict[str, Any], path: str = "checkpoint") -> None:
+    """Refuse a checkpoint whose model config names a class outside ``NETWORK_CLASSES``.
+
+    rsl-rl imports the module a ``class_name`` names and calls what it finds there, so a file
+    naming ``some_module:anything`` would run that module's code in whichever process builds the
+    policy (the evaluator's agent process, a training run). Raises ``CheckpointError`` naming the
+    entry, the class it names and the allowed ones.
+    """
+    model = checkpoint.get("model")
+    if not isinstance(model, dict):
+        raise CheckpointError(f"{path!r} has no model config (a dict under 'model')")
+    for where, name in _class_names(model, "model"):
+        if name not in NETWORK_CLASSES:
+            raise CheckpointError(
+                f"checkpoint {path!r} is refused: {where} is {name!r}, and a checkpoint may only build the "
+                f"package's own networks ({', '.join(NETWORK_CLASSES)}); write checkpoints with hbmp-bench train")
 
 
 def policy_only(checkpoint: dict[str, Any]) -> dict[str, Any]:
@@ -123,9 +165,12 @@ def actor_only(checkpoint: dict[str, Any]) -> dict[str, Any]:
 
 
 def build_actor(checkpoint: dict[str, Any]):
-    """The policy network of a checkpoint, weights loaded, in eval mode."""
+    """The policy network of a checkpoint, weights loaded, in eval mode (its classes checked
+    against ``NETWORK_CLASSES`` first, also for a checkpoint dict that did not come from
+    ``load_checkpoint``)."""
     from hbmp_bench.training.models import build_model
 
+    check_network_classes(checkpoint)
     model = checkpoint["model"]
     shapes = {k: tuple(v) for k, v in model["obs_shapes"].items()}
     actor = build_model(model["actor"], shapes, model["obs_groups"], "actor", model["num_actions"])

@@ -31,6 +31,24 @@ MARKER = "pwned"
 """File a payload creates in ``HBMP_TEST_AGENT_DIR`` if it ever runs in the evaluator."""
 
 
+TEST_VARIABLES = ("HBMP_TEST_AGENT_DIR", "HBMP_TEST_RECORDS", "HBMP_TEST_BOARD")
+"""Variables the tests hand the hostile agents (the sandbox passes only those it is told to)."""
+
+
+def for_tests(limits=None, **changes):
+    """``limits`` (default ``RunnerLimits()``) with ``changes``, letting the hostile agents see
+    ``TEST_VARIABLES`` and write to ``HBMP_TEST_AGENT_DIR`` (where they report) in the sandbox."""
+    import dataclasses
+
+    from hbmp_bench.evaluation import RunnerLimits
+
+    limits = dataclasses.replace(limits or RunnerLimits(), **changes)
+    folder = os.environ.get("HBMP_TEST_AGENT_DIR")
+    writable = (*limits.agent_writable, folder) if folder and folder not in limits.agent_writable else limits.agent_writable
+    return dataclasses.replace(limits, agent_env=tuple(dict.fromkeys((*limits.agent_env, *TEST_VARIABLES))),
+                               agent_writable=writable)
+
+
 def report(name: str, data: dict) -> None:
     """Write what the attack found to ``<HBMP_TEST_AGENT_DIR>/<name>.json`` (last write wins)."""
     folder = os.environ.get("HBMP_TEST_AGENT_DIR")
@@ -400,8 +418,10 @@ class RecordsForgerAgent(_Base):
             lines = path.read_text().splitlines()
         except OSError as exc:
             return f"read denied: {type(exc).__name__}"
+        if not lines:
+            return "no record to copy yet"
         town, task, index = self.key.split("/")
-        template = json.loads(lines[-1]) if lines else {}
+        template = json.loads(lines[-1])
         forged = {**template, "town": town, "task": task, "episode": int(index), "success": True, "end_reason": "goal",
                   "route_completion": 1.0, "driving_score": 100.0, "error": "", "agent": template.get("agent", "")}
         try:
@@ -460,7 +480,7 @@ class SandboxProbeAgent(_Base):
         try:
             os.setuid(0)
             regained = os.getuid() == 0
-        except PermissionError:
+        except OSError:  # EPERM; EINVAL in a user namespace where uid 0 is not mapped
             regained = False
         out, err = os.fstat(1), os.fstat(2)
         report(type(self).__name__, {
@@ -485,3 +505,172 @@ class EmptyRoadsAgent(_Base):
     """Asks for an easier env: no background traffic."""
 
     env_kwargs = {"density": "empty"}
+
+
+# ---------------------------------------------------------------- attacks on the verdict (issue 41, part A)
+
+
+class PreForgingAgent(_Base):
+    """Finding 2: at construction, before the evaluator could note its records file, writes a
+    complete, all-success records file for its episodes and its provenance side file (with the
+    right code fingerprint) to ``HBMP_TEST_RECORDS``, then stands still, hoping it is resumed."""
+
+    def __init__(self):
+        super().__init__()
+        path = os.environ.get("HBMP_TEST_RECORDS")
+        if not path:
+            return
+        from hbmp_bench.evaluation.evaluate import code_fingerprint
+        from hbmp_bench.scenarios import suite_episodes
+
+        outcome = {}
+        records = Path(path)
+        lines = []
+        for k, episode in enumerate(suite_episodes("corl2017", "Town01", "Straight")[:2]):
+            lines.append(json.dumps({
+                "suite": "corl2017", "town": "Town01", "task": "Straight", "episode": k, "seed": episode.seed,
+                "agent": "hostile_agents:PreForgingAgent", "package_version": "0.1.0", "fidelity": "event",
+                "success": True, "route_completion": 1.0, "collision_vehicle": 0, "collision_pedestrian": 0,
+                "collision_other": 0, "wrong_lane": 0, "off_road": 0, "red_light": 0, "timeout": False,
+                "duration_s": 10.0, "distance_m": episode.route_length_m, "route_length_m": episode.route_length_m,
+                "decisions": 10, "driving_score": 100.0, "end_reason": "goal"}) + "\n")
+        side = records.with_name(records.name + ".provenance.json")
+        try:
+            records.write_text("".join(lines))
+            side.write_text(json.dumps({"code": code_fingerprint(), "agent": "", "maps": {}}))
+            outcome["records"] = "written"
+        except OSError as exc:
+            outcome["records"] = f"write denied: {type(exc).__name__}"
+        report(type(self).__name__, outcome)
+
+
+def _chain(marker: str, rounds: int) -> None:
+    """A process chain that re-forks every millisecond (each parent exits once its child runs),
+    each link in a session of its own; the last one leaves ``marker``."""
+    for _ in range(rounds):
+        try:
+            os.setsid()
+        except OSError:
+            pass
+        if os.fork() != 0:
+            os._exit(0)
+        time.sleep(0.001)
+    Path(os.environ["HBMP_TEST_AGENT_DIR"], marker).write_text(str(os.getpid()))
+    os._exit(0)
+
+
+class ForkChainAgent(_Base):
+    """Finding 5: five chains that re-fork every millisecond (an orphan hunt that stops at the
+    first empty scan misses them); each would leave ``chain-<k>`` after about 2 s."""
+
+    def attack(self):
+        for k in range(5):
+            if os.fork() == 0:
+                _chain(f"chain-{k}", 2000)
+        report(type(self).__name__, {"chains": 5})
+
+
+class ForkServerAgent(_Base):
+    """Finding 5: looks for the evaluator's fork-server socket (``/tmp/pymp-*/listener-*``) and
+    asks it to fork, as an agent of the evaluator's user could."""
+
+    def attack(self):
+        import glob
+
+        found = glob.glob("/tmp/pymp-*/listener-*")
+        outcome = {"sockets": found}
+        for path in found:
+            try:
+                with socket.socket(socket.AF_UNIX) as sock:
+                    sock.settimeout(1.0)
+                    sock.connect(path)
+                    outcome[path] = "connected"
+            except OSError as exc:
+                outcome[path] = f"denied: {type(exc).__name__}"
+        report(type(self).__name__, outcome)
+
+
+class UidAgent(_Base):
+    """Reports its uid (the tests compare two evaluations')."""
+
+    def attack(self):
+        report(f"{type(self).__name__}-{os.getuid()}", {"uid": os.getuid()})
+        time.sleep(1.0)  # so the two evaluations' agents overlap
+
+
+class SnoopingAgent(_Base):
+    """Findings 9 and 5: reads its environment (API tokens), opens connections (to the host's
+    loopback, where the test listens, to the internet, to an abstract Unix socket of the host)
+    and lists the processes it can see."""
+
+    def attack(self):
+        outcome = {"environ": sorted(os.environ), "secret": os.environ.get("HBMP_FAKE_API_TOKEN", "")}
+        port = int(os.environ.get("HBMP_TEST_PORT", "0") or 0)
+        targets = {"loopback": (socket.AF_INET, ("127.0.0.1", port)), "internet": (socket.AF_INET, ("1.1.1.1", 80)),
+                   "abstract": (socket.AF_UNIX, "\0" + os.environ.get("HBMP_TEST_ABSTRACT", "hbmp-test"))}
+        for name, (family, address) in targets.items():
+            try:
+                with socket.socket(family, socket.SOCK_STREAM) as sock:
+                    sock.settimeout(1.0)
+                    sock.connect(address)
+                    outcome[name] = "connected"
+            except OSError as exc:
+                outcome[name] = f"failed: {type(exc).__name__}: {exc}"
+        outcome["processes"] = sorted(int(p) for p in os.listdir("/proc") if p.isdigit())
+        report(type(self).__name__, outcome)
+
+
+class PycPoisonerAgent(_Base):
+    """Finding 7: writes bytecode for a package module (``hbmp_bench/metrics/episode.py``) that
+    would run its own code in the next process importing it, both in the module's
+    ``__pycache__`` and as a fresh ``__pycache__`` folder of the package."""
+
+    def attack(self):
+        import importlib.util
+        import marshal
+
+        import hbmp_bench.metrics.episode as target
+
+        payload = compile("import pathlib, os; pathlib.Path(os.environ.get('HBMP_TEST_AGENT_DIR', '/tmp'), "
+                          "'pwned-pyc').write_text('x')", target.__file__, "exec")
+        cached = importlib.util.cache_from_source(target.__file__)
+        st = os.stat(target.__file__)
+        data = importlib.util.MAGIC_NUMBER + struct.pack("<III", 0, int(st.st_mtime) & 0xFFFFFFFF,
+                                                         st.st_size & 0xFFFFFFFF) + marshal.dumps(payload)
+        outcome = {}
+        for name, path in {"pycache": cached, "beside": target.__file__ + "c"}.items():
+            try:
+                os.makedirs(os.path.dirname(path), exist_ok=True)
+                with open(path + ".hbmp-test", "xb") as fh:  # never the live name: a test must not poison a tree
+                    fh.write(data)
+                outcome[name] = f"written: {path}.hbmp-test"
+            except OSError as exc:
+                outcome[name] = f"denied: {type(exc).__name__}"
+        report(type(self).__name__, outcome)
+
+
+class SlowAgent(_Base):
+    """Finding 8: takes just under the decision timeout at every decision (``HBMP_TEST_SLOW_S``)."""
+
+    def act(self, observation, info):
+        time.sleep(float(os.environ.get("HBMP_TEST_SLOW_S", "2.0")))
+        return KEEP
+
+
+class HomeReaderAgent(_Base):
+    """Reads what it can of the evaluator's home and of the records key the seals use."""
+
+    def attack(self):
+        import pwd as pwd_module
+
+        outcome = {}
+        home = os.environ.get("HBMP_TEST_EVALUATOR_HOME") or pwd_module.getpwuid(0).pw_dir
+        for path in (home, os.path.join(home, ".config", "hbmp-bench", "records.key"), "/etc/shadow"):
+            try:
+                if os.path.isdir(path):
+                    outcome[path] = f"listed {len(os.listdir(path))}"
+                else:
+                    outcome[path] = f"read {len(open(path, 'rb').read())} bytes"
+            except OSError as exc:
+                outcome[path] = f"denied: {type(exc).__name__}"
+        report(type(self).__name__, outcome)

@@ -7,6 +7,7 @@ tests assert what each case guarantees, and run the agent as the evaluator's own
 (``agent_user=None``) where they check what the evaluator itself must catch.
 """
 
+import dataclasses
 import json
 import os
 import pwd
@@ -17,9 +18,12 @@ from pathlib import Path
 import pytest
 
 import tiny_suite
+from hostile_agents import for_tests
 from hbmp_bench.evaluation import EpisodePool, RunnerLimits, evaluate, suite_tasks
 from hbmp_bench.evaluation.channel import MAX_TEXT_BYTES
 from hbmp_bench.evaluation.integrity import TamperedError
+from hbmp_bench.evaluation.namespaces import UID_BASE, UID_COUNT
+from hbmp_bench.evaluation.pool import FORKED, SANDBOX, isolation
 from hbmp_bench.evaluation.leaderboard import entry_path, load_entries, results_document, submit, write_json
 from hbmp_bench.metrics.records import AGENT_ERROR, DECISION_CAP, EpisodeRecord, read_records
 from hbmp_bench.metrics.report import build_report, records_frame
@@ -36,7 +40,7 @@ def run(agents, limits=QUICK, episodes=1):
     tasks = [t for a in agents for t in suite_tasks("corl2017", a if ":" in a or a == "expert" else f"hostile_agents:{a}",
                                                         towns=["Town01"], tasks=["Straight"], episodes=episodes,
                                                         fidelity="event")]
-    with EpisodePool(1, limits) as pool:
+    with EpisodePool(1, for_tests(limits)) as pool:
         return {o.record.agent.split(":")[-1]: o.record for o in pool.imap(tasks)}
 
 
@@ -101,15 +105,25 @@ def test_the_agent_process_is_confined(agent_dir):
     pipes = [t for t in extra.values() if t.startswith("pipe:")]
     assert len(sockets) == 1 and len(pipes) == 1  # the channel and the lifeline, nothing inherited
     others = [t for t in extra.values() if t not in sockets + pipes]
-    if ROOT:
-        nobody = pwd.getpwnam("nobody")
-        assert facts["uid"] == facts["euid"] == nobody.pw_uid and facts["gid"] == nobody.pw_gid
+    assert others == [] and facts["home"] == "/tmp"  # the sandbox shows every import folder; HOME is its /tmp
+    assert facts["pid"] == 2  # in a PID namespace of its own, under bwrap's init
+    if ROOT:  # a uid of its own for this evaluation, no account, not nobody's
+        assert UID_BASE <= facts["uid"] == facts["euid"] == facts["gid"] < UID_BASE + UID_COUNT
         assert facts["groups"] == [] and not facts["regained_root"]
         assert facts["rlimits"]["RLIMIT_NPROC"] == [QUICK.agent_processes] * 2
-        assert facts["home"] == nobody.pw_dir
-        assert all(os.path.isdir(t) for t in others)  # import folders it could not reach, opened before the switch
     else:
-        assert facts["uid"] == os.getuid() and others == []
+        assert facts["uid"] == os.getuid()
+
+
+def test_the_package_agents_keep_the_forked_confinement(agent_dir):
+    """Registered agents are the package's own code: they are forked (fast), confined by the
+    session, limits and (as root) ``agent_user``, as before the namespace sandbox."""
+    tasks = suite_tasks("corl2017", "expert", towns=["Town01"], tasks=["Straight"], episodes=1, fidelity="event")
+    assert isolation("expert", QUICK) == FORKED and isolation("hostile_agents:SandboxProbeAgent", QUICK) == SANDBOX
+    assert isolation("hostile_agents:SandboxProbeAgent", RunnerLimits(trust_agent=True)) == FORKED
+    with EpisodePool(1, QUICK) as pool:
+        (outcome,) = list(pool.imap(tasks))
+    assert outcome.record.end_reason == DECISION_CAP and outcome.record.error == ""
 
 
 def test_the_simulator_is_out_of_reach(agent_dir):
@@ -121,7 +135,21 @@ def test_the_simulator_is_out_of_reach(agent_dir):
 
 
 def test_the_evaluators_memory_is_out_of_reach(agent_dir):
+    """In its PID namespace the agent finds no process of the evaluator: its parent is the
+    sandbox's init, there is no grandparent and no sibling (the env process)."""
     run(["ProcMemAgent"])
+    targets = found(agent_dir, "ProcMemAgent")
+    assert set(targets) == {"parent", "grandparent"}
+    assert targets["parent"]["pid"] == 1 and targets["grandparent"]["pid"] == 0
+    for role, outcome in targets.items():
+        for attempt in ("read", "write", "ptrace", "environ"):
+            assert "denied" in outcome[attempt], (role, outcome)
+
+
+def test_the_evaluators_memory_is_out_of_reach_of_a_trusted_agent(agent_dir):
+    """Without the sandbox (``trust_agent``) the evaluator's processes are visible, but
+    non-dumpable: their memory, environment and ptrace are denied."""
+    run(["ProcMemAgent"], dataclasses.replace(QUICK, trust_agent=True))
     targets = found(agent_dir, "ProcMemAgent")
     assert {"parent", "grandparent", "sibling0"} <= set(targets)  # fork server, this process, the env process
     for role, outcome in targets.items():
@@ -142,12 +170,8 @@ def test_forked_children_do_not_outlive_the_episode(agent_dir):
     from hostile_agents import LINGER_S
 
     records = run(["ForkingAgent"])
-    children = found(agent_dir, "ForkingAgent")
+    children = found(agent_dir, "ForkingAgent")  # pids in the agent's own PID namespace
     assert set(children) == {"same_group", "own_group", "daemon"}
-    deadline = time.monotonic() + 2.0
-    while any(_alive(pid) for pid in children.values()) and time.monotonic() < deadline:
-        time.sleep(0.05)
-    assert not [name for name, pid in children.items() if _alive(pid)]
     time.sleep(LINGER_S + 0.5)
     assert not list(Path(agent_dir).glob("survivor-*"))  # none lived to leave its marker
     assert records["ForkingAgent"].end_reason == DECISION_CAP
@@ -209,14 +233,14 @@ def _forge(monkeypatch, agent_dir, folder, **limits):
     records = folder / "corl2017__hostile_agents.RecordsForgerAgent.jsonl"
     monkeypatch.setenv("HBMP_TEST_RECORDS", str(records))
     return evaluate("corl2017", "hostile_agents:RecordsForgerAgent", towns=["Town01"], tasks=["Straight"], episodes=2,
-                    workers=1, progress=False, fidelity="event", out_dir=folder, limits=RunnerLimits(**limits))
+                    workers=1, progress=False, fidelity="event", out_dir=folder, limits=for_tests(**limits))
 
 
 def test_a_forger_with_the_evaluators_user_is_caught_and_its_file_moved_aside(agent_dir, monkeypatch, tmp_path):
     folder = Path(agent_dir) / "runs"
     folder.mkdir()
     with pytest.raises(TamperedError, match="changed while the evaluation ran"):
-        _forge(monkeypatch, agent_dir, folder, agent_user=None)
+        _forge(monkeypatch, agent_dir, folder, agent_user=None, trust_agent=True)
     assert found(agent_dir, "RecordsForgerAgent")["records"] == "appended"  # the attack did write
     assert not list(folder.glob("*.jsonl"))  # moved aside: no report, resume or board reads it
     (tampered,) = folder.glob("*.jsonl.tampered")
@@ -224,11 +248,22 @@ def test_a_forger_with_the_evaluators_user_is_caught_and_its_file_moved_aside(ag
 
 
 @pytest.mark.skipif(not ROOT, reason="the agent switches to nobody only when the evaluator runs as root")
-def test_a_forger_running_as_nobody_cannot_write(agent_dir, monkeypatch, tmp_path):
+def test_a_trusted_forger_running_as_nobody_cannot_write(agent_dir, monkeypatch, tmp_path):
     folder = Path(agent_dir) / "runs"
     folder.mkdir()
-    result = _forge(monkeypatch, agent_dir, folder)
+    result = _forge(monkeypatch, agent_dir, folder, trust_agent=True)
     assert "denied" in found(agent_dir, "RecordsForgerAgent")["records"]
+    assert [r.end_reason for r in result.records] == [AGENT_ERROR, AGENT_ERROR]
+    assert not any(r.success for r in read_records(result.path))
+
+
+def test_a_sandboxed_forger_cannot_even_see_the_records(agent_dir, monkeypatch, readable_dir):
+    folder = readable_dir / "runs"  # writable by every user, and still not in the sandbox's view
+    folder.mkdir()
+    os.chmod(folder, 0o777)
+    result = _forge(monkeypatch, agent_dir, folder)
+    assert found(agent_dir, "RecordsForgerAgent")["records"] == "read denied: FileNotFoundError"
+    assert [r.end_reason for r in result.records] == [AGENT_ERROR, AGENT_ERROR]
     assert [r.end_reason for r in result.records] == [AGENT_ERROR, AGENT_ERROR]
     assert not any(r.success for r in read_records(result.path))
 
@@ -251,7 +286,7 @@ def test_a_forged_leaderboard_entry_is_refused(agent_dir, monkeypatch):
     root = Path(agent_dir) / "board"
     folder = _board_with_an_entry(root)
     monkeypatch.setenv("HBMP_TEST_BOARD", str(folder))
-    limits = RunnerLimits(env_factory="tiny_suite:make_env", agent_user=None)
+    limits = for_tests(env_factory="tiny_suite:make_env", agent_user=None, trust_agent=True)
     with pytest.raises(TamperedError, match="forged-champion.event.json"):
         submit(tiny_suite.NAME, "hostile_agents:RecordsForgerAgent", board_dir=root, fidelity="event", workers=1,
                limits=limits, progress=False)
@@ -262,26 +297,28 @@ def test_a_forged_leaderboard_entry_is_refused(agent_dir, monkeypatch):
     assert not readme.exists() or "forged-champion" not in readme.read_text()
 
 
-def test_killing_the_env_process_is_a_visible_sim_error_that_is_never_ranked(agent_dir, tmp_path):
-    limits = RunnerLimits(env_factory="tiny_suite:make_env", agent_user=None, retries=0)
+def test_killing_the_env_process_in_its_turn_is_the_agents_failure_not_a_retry(agent_dir, tmp_path):
+    """Finding 6: a trusted agent (no sandbox: it sees and may signal the env process) that kills
+    the env process while it has the turn fails its episode; no clean retry hides it."""
+    limits = for_tests(env_factory="tiny_suite:make_env", agent_user=None, retries=1, trust_agent=True)
     path, doc = submit(tiny_suite.NAME, "hostile_agents:EnvKillerAgent", board_dir=tmp_path, fidelity="event",
                        workers=1, limits=limits, progress=False)
     assert "killed" in found(agent_dir, "EnvKillerAgent").values()
-    assert doc["sim_errors"] == 2 and not doc["complete"] and doc["summary"]["episodes"] == 0
-    assert not any(e["success"] for e in doc["episodes"])
-    readme = (tmp_path / tiny_suite.NAME / "README.md").read_text()
-    assert "Partial runs (not ranked)" in readme
-    lines = readme.splitlines()
-    header = [c.strip() for c in next(line for line in lines if line.startswith("| rank")).strip("|").split("|")]
-    row = [c.strip() for c in next(line for line in lines if "EnvKillerAgent" in line).strip("|").split("|")]
-    assert row[header.index("rank")] == "–" and row[header.index("sim errors")] == "2"
-    report = build_report(sorted((tmp_path / tiny_suite.NAME / "runs").rglob("*.jsonl")))
-    assert report["failures"]["sim_errors"].sum() == 2 and report["coverage"]["sim_errors_left_out"].sum() == 2
+    assert doc["sim_errors"] == 0 and not any(e["success"] for e in doc["episodes"])
+    records = read_records(next((tmp_path / tiny_suite.NAME / "runs").rglob("*.jsonl")))
+    assert [r.end_reason for r in records] == [AGENT_ERROR, AGENT_ERROR]
+    assert all("while the agent had the turn" in r.error for r in records)
+
+
+def test_a_sandboxed_agent_finds_no_env_process_to_kill(agent_dir):
+    records = run(["EnvKillerAgent"])
+    assert found(agent_dir, "EnvKillerAgent") == {}  # its PID namespace holds no other process than its own
+    assert_counted_failure(records["EnvKillerAgent"], "the env process survived")
 
 
 @pytest.mark.skipif(not ROOT, reason="the agent switches to nobody only when the evaluator runs as root")
-def test_an_agent_running_as_nobody_cannot_kill_the_env_process(agent_dir):
-    records = run(["EnvKillerAgent"])
+def test_a_trusted_agent_running_as_nobody_cannot_kill_the_env_process(agent_dir):
+    records = run(["EnvKillerAgent"], dataclasses.replace(QUICK, trust_agent=True))
     outcome = found(agent_dir, "EnvKillerAgent")
     assert outcome and all(value.startswith("denied") for value in outcome.values())
     assert_counted_failure(records["EnvKillerAgent"], "the env process survived")

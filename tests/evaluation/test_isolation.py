@@ -71,6 +71,7 @@ def test_an_agent_importing_the_simulator_cannot_move_the_ego(tmp_path, monkeypa
     log.unlink()
     # Evaluated, the agent runs in its own process: no network is loaded there.
     result = evaluate("corl2017", "misbehaving_agents:CheatingAgent", out_dir=tmp_path / "runs",
+                      limits=RunnerLimits(agent_env=("HBMP_TEST_CHEAT_LOG",), agent_writable=(agent_dir,)),
                       **{**SELECTION, "episodes": 1})
     (record,) = result.records
     (attempt,) = log.read_text().splitlines()
