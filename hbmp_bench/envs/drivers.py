@@ -35,6 +35,7 @@ from hbmp_bench.planning import (Behavior, BehaviorConfig, BehaviorExecutor, Con
                                  PlannerConfig, PlanResult, ReferencePaths, VehicleParams, instant_costs,
                                  reference_speed, reward_from_cost)
 from hbmp_bench.planning import VehicleState as ModelState
+from hbmp_bench.planning.behaviors import LAWFUL_DECEL
 from hbmp_bench.planning import step as bicycle_step
 from hbmp_bench.sim.sumo import Actors, SumoSim, VehicleState, VehicleType
 
@@ -74,6 +75,12 @@ class ContinuousConfig:
 class EventDriver:
     """SUMO drives the behavior: v_ref through ``setSpeed``, lane changes through ``changeLane``.
 
+    v_ref is held to the speed limits of the lane and of the lanes ahead on the route, braking at
+    ``LAWFUL_DECEL`` (:meth:`~hbmp_bench.maps.roadnet.RoadNetwork.speed_ahead`): SUMO moves a car along its
+    lane whatever its speed, so a bend or a turn taken at the speed of the road before it (10-24 m/s² in
+    CARLA's towns) would otherwise go unnoticed; an import's limits follow its bends
+    (:mod:`~hbmp_bench.maps.curves`).
+
     ``setSpeed`` holds v_ref until the next decision and SUMO moves towards it within the ego
     type's acceleration / deceleration (2.6 / 4.5 m/s², :data:`~hbmp_bench.sim.sumo.EGO_TYPE`;
     the speed mode of :meth:`~hbmp_bench.sim.sumo.SumoSim.hand_over` keeps those limits), so with
@@ -102,10 +109,13 @@ class EventDriver:
     def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...],
               into: tuple[frozenset[str], ...] = ()) -> int:
         """Start ``behavior``; ``lane`` is the lane followed (SUMO's own lane in event fidelity); SUMO
-        picks the links the vehicle takes (``into`` is not used)."""
+        picks the links the vehicle takes (``into``, the route's lanes per next edge, only tells which
+        lanes' limits lie ahead)."""
         executed = behavior if feasible_behaviors(self.net, state.lane, state.lane_pos)[behavior] else Behavior.KEEP
         limit = self.net.lane(state.lane).speed
-        self.sim.set_speed(self.vehicle_id, reference_speed(executed, state.speed, limit, self.behavior_config))
+        v_ref = reference_speed(executed, state.speed, limit, self.behavior_config)
+        lawful = self.net.speed_ahead(state.lane, state.lane_pos, next_edges, LAWFUL_DECEL, into)
+        self.sim.set_speed(self.vehicle_id, min(v_ref, lawful))
         if executed in (Behavior.CHANGE_LEFT, Behavior.CHANGE_RIGHT):
             side = +1 if executed == Behavior.CHANGE_LEFT else -1
             self.sim.change_lane(self.vehicle_id, self.net.lane(self.net.neighbour_lane(state.lane, side)).index)

@@ -399,7 +399,7 @@ class GoalRoute:
         on the route's junction lanes, so progress runs on through a junction without a jump."""
         v, ep = self.v, self.episode
         net, state = v.shared.net, v.state
-        self.score.moved_to(state.xy)
+        self.score.moved_to(state.xy, v.shared.sim.time, state.speed, state.yaw)
         if state.lane in net.lanes:
             k = self._pos.get(net.lanes[state.lane].edge)
             if k is None:

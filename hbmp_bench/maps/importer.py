@@ -16,7 +16,8 @@ What an import does:
    Crossings at nodes that only join two pieces of a road are discarded (:mod:`~hbmp_bench.maps.crossings`:
    netconvert widens such a node over the road for the crossing and cuts the piece between to a stub).
    Steps 2 and 3 are one netconvert run over the net (and one more to drop the crossings the sidewalk
-   guess adds at such nodes); a net that needs none is stored byte for byte.
+   guess adds at such nodes); then each drivable lane's speed limit is lowered to what its bends allow
+   (:mod:`~hbmp_bench.maps.curves`, 4 m/s²). A net that needs none of it is stored byte for byte.
 4. Provenance beside the net (``<name>.map.json``, :func:`map_info`): the source file's name and
    SHA-256, the stored net's SHA-256 (records are keyed to it), the netconvert version and every
    option it ran with, the date, and the task parameters (``like``: a built-in town whose CoRL
@@ -41,6 +42,7 @@ from pathlib import Path
 
 from ..errors import UnknownNameError, UserError
 from .crossings import continuation_crossings, discard_xml
+from .curves import limit_curve_speeds
 from .lanetypes import allows, lane_patches, patch_xml, typemap_xml
 from .netconvert import netconvert_version, run_netconvert
 from .registry import INFO_SUFFIX, NET_SUFFIX, file_sha256, info_path, user_maps, user_maps_dir
@@ -250,8 +252,10 @@ def import_map(path: str | Path, name: str, *, like: str | None = None, sidewalk
                 _netconvert(args, tmp_dir, label, "crossing removal")
                 runs.append(args)
                 discarded += guessed
-            if lights == "lawful":
-                retime_yellows(final)
+        curves_lowered = limit_curve_speeds(final)
+        if lights == "lawful":
+            retime_yellows(final)  # after the curve speeds: yellows follow the approach speeds
+        if final is not staged or curves_lowered:
             validate_net(final, label)
         info = {
             "name": name,
@@ -269,6 +273,7 @@ def import_map(path: str | Path, name: str, *, like: str | None = None, sidewalk
             "lanes_closed": {kind: sum(p[2] == kind for p in patches) for kind in sorted({p[2] for p in patches})},
             "sidewalks_guessed": guess_sidewalks,
             "crossings_discarded": len(discarded),
+            "curve_speed_lanes": curves_lowered,
         }
         _install(final, info, name)
     from .roadnet import load_road_network

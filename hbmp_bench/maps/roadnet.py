@@ -512,6 +512,30 @@ class RoadNetwork:
             return steps[0]
         return options[0][0] if options else None
 
+    def speed_ahead(self, lane_id: str, lane_pos: float, next_edges: tuple[str, ...], decel: float,
+                    into: tuple[frozenset[str], ...] = ()) -> float:
+        """The highest speed [m/s] from which a car at ``lane_pos`` [m] on ``lane_id`` keeps every speed limit of
+        the lanes it follows towards ``next_edges`` (junction lanes included; :meth:`follow`, into the route's
+        lanes ``into`` per next edge), braking at ``decel`` [m/s²]: min over those lanes of sqrt(limit² + 2 decel
+        d), d [m] from ``lane_pos`` to the lane's start; the lane's own limit first. Looks no farther than a car
+        at the fastest limit seen needs to brake."""
+        lane = self.lane(lane_id)
+        best = lane.speed
+        d = lane.length - float(lane_pos)
+        current, k = lane_id, 0
+        reach = best * best / (2.0 * decel)
+        while d < reach:
+            nxt_edge = next_edges[k] if k < len(next_edges) else None
+            step = self.follow(current, nxt_edge, into[k] if k < len(into) else frozenset())
+            if step is None or (step in self.lanes and nxt_edge is None):
+                break
+            ahead = self.lane(step)
+            best = min(best, math.sqrt(ahead.speed * ahead.speed + 2.0 * decel * max(d, 0.0)))
+            if step in self.lanes:
+                k += 1
+            current, d = step, d + ahead.length
+        return best
+
     def changes_into(self, lane_id: str, into: frozenset[str] | None) -> int:
         """Lane changes from ``lane_id`` to the nearest lane of ``into`` on its edge (0 without ``into``)."""
         lane = self.lanes.get(lane_id)

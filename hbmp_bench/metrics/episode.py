@@ -77,8 +77,46 @@ class EpisodeId:
     route_length_m: float
 
 
+LATERAL_WINDOW_S = 1.0
+"""Lateral acceleration is measured as speed × yaw rate, both averaged over this window [s]: what a car's
+occupants feel in a bend, not the steps of a polyline (SUMO's heading turns at a lane shape's vertices, and
+its lane changes move a car sideways without turning it)."""
+
+
+class LateralAcceleration:
+    """Peak lateral acceleration [m/s²] of a vehicle: its mean speed × its mean yaw rate over any
+    ``window_s`` [s], from samples of (time [s], speed [m/s], yaw [rad])."""
+
+    def __init__(self, window_s: float = LATERAL_WINDOW_S):
+        self.window_s = float(window_s)
+        self.peak_mps2 = 0.0
+        self._samples: list[tuple[float, float, float]] = []  # (time [s], road driven [m], unwrapped yaw [rad])
+        self._start = 0
+        self._speed = 0.0
+
+    def add(self, time_s: float, speed_mps: float, yaw: float) -> None:
+        """A sample; raises the peak once the samples span the window."""
+        driven = 0.0
+        if self._samples:
+            t_last, driven, last = self._samples[-1]
+            yaw = last + (yaw - last + np.pi) % (2 * np.pi) - np.pi
+            driven += 0.5 * (self._speed + speed_mps) * (time_s - t_last)  # the speeds' integral: the road driven
+        self._speed = float(speed_mps)
+        self._samples.append((float(time_s), float(driven), float(yaw)))
+        while self._start + 1 < len(self._samples) and self._samples[self._start + 1][0] <= time_s - self.window_s + 1e-9:
+            self._start += 1  # the newest sample at least a window old
+        t0, s0, psi0 = self._samples[self._start]
+        span = time_s - t0
+        if span >= self.window_s - 1e-9:
+            self.peak_mps2 = max(self.peak_mps2, abs((driven - s0) / span * (yaw - psi0) / span))
+        if self._start > 64:  # keep the list short
+            del self._samples[:self._start]
+            self._start = 0
+
+
 class EpisodeScorer:
-    """Distance driven [m], progress along the route [m] (monotone), and the episode record.
+    """Distance driven [m], progress along the route [m] (monotone), peak lateral acceleration [m/s²] and the
+    episode record.
 
     Args:
         route_length_m: length of the route to drive [m].
@@ -90,11 +128,19 @@ class EpisodeScorer:
         self.distance_m = 0.0
         self.progress_m = 0.0
         self._last_xy = np.asarray(start_xy, dtype=float)
+        self.lateral: LateralAcceleration | None = None
+        """Fed where :meth:`moved_to` is given the yaw and the time (-1 in the record where never)."""
 
-    def moved_to(self, xy: np.ndarray) -> None:
-        """The vehicle's centre is now at ``xy`` (2,) [m]: adds the straight step to the distance."""
+    def moved_to(self, xy: np.ndarray, time_s: float | None = None, speed_mps: float | None = None,
+                 yaw: float | None = None) -> None:
+        """The vehicle's centre is now at ``xy`` (2,) [m]: adds the straight step to the distance; given the time
+        [s], speed [m/s] and heading [rad] now, a sample of the lateral acceleration too."""
         self.distance_m += float(np.hypot(*(xy - self._last_xy)))
         self._last_xy = xy
+        if time_s is not None and speed_mps is not None and yaw is not None:
+            if self.lateral is None:
+                self.lateral = LateralAcceleration()
+            self.lateral.add(time_s, speed_mps, yaw)
 
     def progressed_to(self, progress_m: float) -> None:
         """A progress reading [m]: progress never goes back and stops at the route's length;
@@ -127,4 +173,5 @@ class EpisodeScorer:
             route_length_m=episode.route_length_m, decisions=decisions,
             driving_score=round(driving_score(completion, totals), 3), end_reason=end_reason or "running",
             traffic_vehicles=int(traffic[0]), traffic_pedestrians=int(traffic[1]),
+            peak_lateral_accel_mps2=round(self.lateral.peak_mps2, 2) if self.lateral is not None else -1.0,
         )

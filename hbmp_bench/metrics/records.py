@@ -44,7 +44,9 @@ class EpisodeRecord:
     ``traffic_vehicles`` / ``traffic_pedestrians``: the background vehicles and pedestrians put into
     the simulation at the episode's start (SUMO inserts a vehicle whose place is taken as soon as it is
     free; a pedestrian without a walk between its edges is left out: what spawned, not what the episode
-    asked for). -1: not recorded (an error record, the highway-env transfer, a record older than the field).
+    asked for). ``peak_lateral_accel_mps2``: the largest speed × yaw rate over any 1 s of the episode [m/s²]
+    (:class:`~hbmp_bench.metrics.episode.LateralAcceleration`). -1: not recorded (an error record, the
+    highway-env transfer, a record older than the field).
     """
 
     suite: str
@@ -73,6 +75,7 @@ class EpisodeRecord:
     error: str = ""
     traffic_vehicles: int = -1
     traffic_pedestrians: int = -1
+    peak_lateral_accel_mps2: float = -1.0
 
     @property
     def collisions(self) -> int:
