@@ -31,7 +31,7 @@ from pathlib import Path
 from hbmp_bench.errors import Interrupted, UnknownNameError, UserError
 from hbmp_bench.evaluation.channel import AgentDescription
 from hbmp_bench.evaluation.integrity import RecordsLedger, RecordsSeal, TamperedError, quarantine, records_lock
-from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool, describe_agent
+from hbmp_bench.evaluation.pool import AgentBuildError, EpisodeOutcome, EpisodePool, describe_agent
 from hbmp_bench.evaluation.salting import SaltKeeper, commitment
 from hbmp_bench.evaluation.tasks import (EpisodeTask, RunnerLimits, agent_slug, is_privileged, suite_tasks,
                                          with_agent_env)
@@ -200,6 +200,8 @@ def evaluate(
 
     if agent not in AGENTS and not agent.endswith(".pt") and ":" not in agent:  # as load_agent says, before any file
         raise UnknownNameError("agent", agent, [*AGENTS, "<module:Class>", "<path/to/checkpoint.pt>"])
+    if agent.endswith(".pt") and agent not in AGENTS and not os.path.isfile(agent):
+        raise AgentBuildError(f"agent could not be built: no checkpoint file {agent!r}")
     path = Path(path) if path is not None else records_path(out_dir, selection[0].suite, agent, salted)
     path.parent.mkdir(parents=True, exist_ok=True)
     with records_lock(path):

@@ -143,10 +143,7 @@ def check_network_classes(checkpoint: dict[str, Any], path: str = "checkpoint") 
     policy (the evaluator's agent process, a training run). Raises ``CheckpointError`` naming the
     entry, the class it names and the allowed ones.
     """
-    model = checkpoint.get("model")
-    if not isinstance(model, dict):
-        raise CheckpointError(f"{path!r} has no model config (a dict under 'model')")
-    for where, name in _class_names(model, "model"):
+    for where, name in _class_names(checkpoint.get("model"), "model"):
         if name not in NETWORK_CLASSES:
             raise CheckpointError(
                 f"checkpoint {path!r} is refused: {where} is {name!r}, and a checkpoint may only build the "
