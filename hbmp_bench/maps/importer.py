@@ -255,6 +255,8 @@ def import_map(path: str | Path, name: str, *, like: str | None = None, sidewalk
         curves_lowered = limit_curve_speeds(final)
         if lights == "lawful":
             retime_yellows(final)  # after the curve speeds: yellows follow the approach speeds
+        if runs:
+            _strip_header(final)
         if final is not staged or curves_lowered:
             validate_net(final, label)
         info = {
@@ -280,6 +282,17 @@ def import_map(path: str | Path, name: str, *, like: str | None = None, sidewalk
 
     load_road_network.cache_clear()
     return user_maps_dir() / f"{name}{NET_SUFFIX}"
+
+
+_HEADER = re.compile(rb"<!-- generated on .*?-->\n", re.S)
+
+
+def _strip_header(path: Path) -> None:
+    """Drop the comment netconvert writes at the top of a net it made: its date and the temporary paths it read
+    (its options are in the provenance), so that one source file always imports to the same bytes (the net's
+    SHA-256, which records and boards are keyed to, is reproducible)."""
+    data = path.read_bytes()
+    path.write_bytes(_HEADER.sub(b"", data, count=1))
 
 
 def _install(net: Path, info: dict, name: str) -> None:
