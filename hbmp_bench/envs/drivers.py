@@ -30,13 +30,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hbmp_bench.envs.observation import followed_path
-from hbmp_bench.maps.curves import LATERAL_ACCEL_MAX_MPS2
 from hbmp_bench.maps.roadnet import LANE_CHANGE_CUTOFF_M, RoadNetwork
 from hbmp_bench.planning import (Behavior, BehaviorConfig, BehaviorExecutor, Control, ExecutorConfig, Obstacles,
                                  PlannerConfig, PlanResult, ReferencePaths, VehicleParams, instant_costs,
                                  reference_speed, reward_from_cost)
 from hbmp_bench.planning import VehicleState as ModelState
-from hbmp_bench.planning.behaviors import LAWFUL_DECEL
 from hbmp_bench.planning import step as bicycle_step
 from hbmp_bench.sim.sumo import Actors, SumoSim, VehicleState, VehicleType
 
@@ -73,20 +71,8 @@ class ContinuousConfig:
     obstacle_radius_m: float = 60.0
 
 
-TURN_WINDOW_S = 1.0
-"""The event-fidelity ego's yaw rate is measured over this long [s] (as the records' lateral acceleration)."""
-
-
 class EventDriver:
     """SUMO drives the behavior: v_ref through ``setSpeed``, lane changes through ``changeLane``.
-
-    v_ref is held to the speed limits of the lane and of the lanes ahead on the route, braking at
-    ``LAWFUL_DECEL`` (:meth:`~hbmp_bench.maps.roadnet.RoadNetwork.speed_ahead`): SUMO moves a car along its
-    lane whatever its speed, so a bend or a turn taken at the speed of the road before it (10-24 m/s² in
-    CARLA's towns) would otherwise go unnoticed; an import's limits follow its bends
-    (:mod:`~hbmp_bench.maps.curves`). While the car turns, v_ref is also held to
-    ``LATERAL_ACCEL_MAX_MPS2`` over its yaw rate of the last second (no speeding up out of a turn that goes on
-    into the next lane).
 
     ``setSpeed`` holds v_ref until the next decision and SUMO moves towards it within the ego
     type's acceleration / deceleration (2.6 / 4.5 m/s², :data:`~hbmp_bench.sim.sumo.EGO_TYPE`;
@@ -109,36 +95,17 @@ class EventDriver:
         self.last_plan: PlanResult | None = None
         self.off_map = False
         """Whether the vehicle's pose could not be put into SUMO (far off its route): never here."""
-        self._headings: list[tuple[float, float]] = []
-        """(time [s], unwrapped yaw [rad]) at each decision of the last second."""
 
     def reset(self, state: VehicleState) -> None:
         self._left = 0
-        self._headings = []
-
-    def _turn_speed(self, yaw: float) -> float:
-        """The highest speed [m/s] at which the yaw rate of the last second gives ``LATERAL_ACCEL_MAX_MPS2``."""
-        now = self.sim.time
-        if self._headings:
-            last = self._headings[-1][1]
-            yaw = last + (yaw - last + math.pi) % (2 * math.pi) - math.pi
-        self._headings.append((now, yaw))
-        while len(self._headings) > 1 and self._headings[1][0] <= now - TURN_WINDOW_S + 1e-9:
-            self._headings.pop(0)
-        t0, yaw0 = self._headings[0]
-        rate = abs(yaw - yaw0) / (now - t0) if now - t0 >= 0.5 * TURN_WINDOW_S else 0.0
-        return LATERAL_ACCEL_MAX_MPS2 / rate if rate > 1e-9 else math.inf
 
     def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...],
               into: tuple[frozenset[str], ...] = ()) -> int:
         """Start ``behavior``; ``lane`` is the lane followed (SUMO's own lane in event fidelity); SUMO
-        picks the links the vehicle takes (``into``, the route's lanes per next edge, only tells which
-        lanes' limits lie ahead)."""
+        picks the links the vehicle takes (``into`` is not used)."""
         executed = behavior if feasible_behaviors(self.net, state.lane, state.lane_pos)[behavior] else Behavior.KEEP
         limit = self.net.lane(state.lane).speed
-        v_ref = reference_speed(executed, state.speed, limit, self.behavior_config)
-        lawful = self.net.speed_ahead(state.lane, state.lane_pos, next_edges, LAWFUL_DECEL, into)
-        self.sim.set_speed(self.vehicle_id, min(v_ref, lawful, self._turn_speed(state.yaw)))
+        self.sim.set_speed(self.vehicle_id, reference_speed(executed, state.speed, limit, self.behavior_config))
         if executed in (Behavior.CHANGE_LEFT, Behavior.CHANGE_RIGHT):
             side = +1 if executed == Behavior.CHANGE_LEFT else -1
             self.sim.change_lane(self.vehicle_id, self.net.lane(self.net.neighbour_lane(state.lane, side)).index)

@@ -25,7 +25,7 @@ import numpy as np
 
 from hbmp_bench.envs.config import WorldConfig
 from hbmp_bench.envs.world import EGO_ID, DrivingWorld
-from hbmp_bench.planning.behaviors import LAWFUL_DECEL, Behavior
+from hbmp_bench.planning.behaviors import Behavior
 from hbmp_bench.scenarios import Episode, suite_episodes
 
 __all__ = ["LAWFUL_DECEL", "REACTION_S", "STANDSTILL_MPS", "StopTrace", "lawful_stopping_distance",
@@ -33,6 +33,8 @@ __all__ = ["LAWFUL_DECEL", "REACTION_S", "STANDSTILL_MPS", "StopTrace", "lawful_
 
 REACTION_S = 1.0
 """Reaction time of the lawful stopping distance [s]."""
+LAWFUL_DECEL = 3.0
+"""Deceleration of the lawful stopping distance [m/s²] (a comfortable stop)."""
 STANDSTILL_MPS = 0.01
 """Below this speed the ego stands [m/s]."""
 AT_LIMIT_MPS = 0.1

@@ -6,7 +6,7 @@ Town02: 50 km/h through 8 m radii), so SUMO's driver took them at 24 m/s². An i
 lane's speed limit, normal and junction lanes alike, to :func:`curve_speed`: the highest speed at which
 the lane's sharpest bend gives at most ``LATERAL_ACCEL_MAX_MPS2`` averaged over one second of driving
 (the measure of :class:`~hbmp_bench.metrics.episode.LateralAcceleration`). SUMO's drivers brake for a
-lower limit ahead, and the ego's v_ref follows the limit of its lane, in both fidelities.
+lower limit ahead; the ego's speed_up stops at its lane's limit.
 """
 
 from __future__ import annotations
@@ -65,35 +65,6 @@ def curve_speed(shape: np.ndarray, limit_mps: float, a_max: float = LATERAL_ACCE
     return v
 
 
-def allowed_speeds(shape: np.ndarray, limits: np.ndarray, a_max: float = LATERAL_ACCEL_MAX_MPS2,
-                   window_s: float = CURVE_WINDOW_S) -> tuple[np.ndarray, np.ndarray]:
-    """Along a path (N, 2) [m] with the speed limit [m/s] of each of its points (N,): (arc length (M,) [m],
-    the highest speed (M,) [m/s] at each resampled point from which the next ``window_s`` of driving turns
-    the car by at most ``a_max`` [m/s²] (speed × turn / ``window_s``), never above the limit there (nor
-    below ``MIN_CURVE_SPEED_MPS``)). Points every ``_SPACING_M``; speeds searched in steps of 0.5 m/s."""
-    shape = np.asarray(shape, dtype=float)[:, :2]
-    seg = np.hypot(*np.diff(shape, axis=0).T)
-    keep = np.append(True, seg > 1e-9)
-    pts, lim = shape[keep], np.asarray(limits, dtype=float)[keep]
-    arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
-    s = np.append(np.arange(0.0, arc[-1], _SPACING_M), arc[-1]) if len(pts) > 1 else np.zeros(1)
-    limit_at = lim[np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(lim) - 1)]
-    if len(pts) < 2:
-        return s, limit_at
-    x, y = np.interp(s, arc, pts[:, 0]), np.interp(s, arc, pts[:, 1])
-    heading = np.unwrap(np.arctan2(np.diff(y), np.diff(x)))
-    heading = np.append(heading, heading[-1])  # (M,): the heading leaving each point
-    allowed = np.full(len(s), MIN_CURVE_SPEED_MPS)
-    found = np.zeros(len(s), dtype=bool)
-    index = np.arange(len(s))
-    for v in np.arange(MIN_CURVE_SPEED_MPS, float(limit_at.max()) + 0.5, 0.5)[::-1]:
-        k = max(int(round(v * window_s / _SPACING_M)), 1)
-        turn = np.abs(heading[np.minimum(index + k, len(s) - 1)] - heading)  # over the window from each point
-        fits = ~found & (v * turn / window_s <= a_max)
-        allowed[fits], found = v, found | fits
-    return s, np.clip(allowed, np.minimum(MIN_CURVE_SPEED_MPS, limit_at), limit_at)
-
-
 _LANE = re.compile(r'<lane id="(?P<id>[^"]+)"(?P<attrs>[^>]*)>')
 _ATTR = re.compile(r'(?P<key>[\w:]+)="(?P<value>[^"]*)"')
 
@@ -129,5 +100,5 @@ def limit_curve_speeds(path: str | Path, a_max: float = LATERAL_ACCEL_MAX_MPS2) 
     return lowered
 
 
-__all__ = ["LATERAL_ACCEL_MAX_MPS2", "allowed_speeds", "curve_speed", "limit_curve_speeds", "max_turn"]
+__all__ = ["LATERAL_ACCEL_MAX_MPS2", "curve_speed", "limit_curve_speeds", "max_turn"]
 

@@ -512,45 +512,6 @@ class RoadNetwork:
             return steps[0]
         return options[0][0] if options else None
 
-    def speed_ahead(self, lane_id: str, lane_pos: float, next_edges: tuple[str, ...], decel: float,
-                    into: tuple[frozenset[str], ...] = ()) -> float:
-        """The highest speed [m/s] from which a car at ``lane_pos`` [m] on ``lane_id`` keeps, braking at ``decel``
-        [m/s²], every speed limit of the lanes it follows towards ``next_edges`` (junction lanes included; into
-        the route's lanes ``into`` per next edge, :meth:`follow`) and the speed each point of that path allows
-        through the bends after it (:func:`~hbmp_bench.maps.curves.allowed_speeds`: 4 m/s² over a second, the
-        turns at the joints between a real town's short pieces included): min over the points ahead of
-        sqrt(allowed² + 2 decel d)."""
-        s, allowed = self._allowed_ahead(lane_id, tuple(next_edges), tuple(into), float(decel))
-        lane = self.lane(lane_id)
-        at = float(lane_pos) * (lane.shape_length / lane.length if lane.length > 0 else 1.0)
-        ahead = s >= at - 0.25
-        if not ahead.any():
-            return float(allowed[-1])
-        return float(np.sqrt(np.min(allowed[ahead] ** 2 + 2.0 * decel * np.maximum(s[ahead] - at, 0.0))))
-
-    @functools.lru_cache(maxsize=4096)  # noqa: B019 - networks live as long as the process (load_road_network)
-    def _allowed_ahead(self, lane_id: str, next_edges: tuple[str, ...], into: tuple[frozenset[str], ...],
-                       decel: float) -> tuple[np.ndarray, np.ndarray]:
-        """(arc length from the start of ``lane_id`` [m], allowed speed [m/s]) along the path it leads onto."""
-        from hbmp_bench.maps.curves import CURVE_WINDOW_S, allowed_speeds
-
-        lane = self.lane(lane_id)
-        shapes, limits = [lane.shape], [np.full(len(lane.shape), lane.speed)]
-        fastest = lane.speed
-        length, current, k = lane.shape_length, lane_id, 0
-        while length < lane.shape_length + fastest * fastest / (2.0 * decel) + fastest * CURVE_WINDOW_S:
-            nxt_edge = next_edges[k] if k < len(next_edges) else None
-            step = self.follow(current, nxt_edge, into[k] if k < len(into) else frozenset())
-            if step is None or (step in self.lanes and nxt_edge is None):
-                break
-            ahead = self.lane(step)
-            shapes.append(ahead.shape[1:] if np.allclose(ahead.shape[0], shapes[-1][-1]) else ahead.shape)
-            limits.append(np.full(len(shapes[-1]), ahead.speed))
-            fastest = max(fastest, ahead.speed)
-            k += step in self.lanes
-            current, length = step, length + ahead.shape_length
-        return allowed_speeds(np.concatenate(shapes), np.concatenate(limits))
-
     def changes_into(self, lane_id: str, into: frozenset[str] | None) -> int:
         """Lane changes from ``lane_id`` to the nearest lane of ``into`` on its edge (0 without ``into``)."""
         lane = self.lanes.get(lane_id)

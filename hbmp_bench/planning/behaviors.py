@@ -64,10 +64,6 @@ class Behavior(IntEnum):
 
 
 BEHAVIORS = tuple(b.name.lower() for b in Behavior)
-
-LAWFUL_DECEL = 3.0
-"""A comfortable deceleration [m/s²]: of the lawful stopping distance (``envs.stopping``) and of the braking
-that brings a car to the lower speed limits ahead (``RoadNetwork.speed_ahead``)."""
 """The behaviors' names in the paper's order (``BEHAVIORS[b]`` names behavior ``b``)."""
 
 
