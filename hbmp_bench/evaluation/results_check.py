@@ -176,7 +176,8 @@ def record_problems(row: dict, *, end_on_violation: bool, end_on_collision: bool
 def episode_problems(doc: dict, *, against_suite: bool) -> list[str]:
     """Problems of a results file's episodes: each row's own (:func:`record_problems`), keys that
     are not exactly the selection's, and when ``against_suite`` a selection outside the suite's and
-    rows that differ from the suite's episode (seed, route length, a duration past its timeout)."""
+    rows that differ from the suite's episode (seed, route length, a duration past its timeout); an imported map
+    of this machine counts as one of the suite's towns, its episodes drawn on it."""
     from hbmp_bench.scenarios import get_suite, suite_episodes
 
     spec = get_suite(doc["suite"])
@@ -192,7 +193,10 @@ def episode_problems(doc: dict, *, against_suite: bool) -> list[str]:
         if len(set(values)) != len(values) or not values:
             problems.append(f"its selection's {kind} {values} are empty or repeat")
     if against_suite:
-        outside = [t for t in tasks if t not in spec.tasks] + [t for t in towns if t not in spec.towns]
+        from hbmp_bench.maps import user_maps
+
+        imported = set(user_maps())  # a suite runs on an imported map too; its episodes are the map's own
+        outside = [t for t in tasks if t not in spec.tasks] + [t for t in towns if t not in spec.towns and t not in imported]
         outside += [i for i in indices if not 0 <= i < spec.episodes_per_task]
         if outside:
             problems.append(f"its selection holds {outside}, not in suite {spec.name!r} (towns {list(spec.towns)}, "

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from hbmp_bench.maps import import_map, map_stats, net_path, net_stats
+from hbmp_bench.maps import import_map, map_info, map_stats, net_path, net_stats
 from hbmp_bench.maps.lanetypes import CAR_LANE_TYPES, lane_type
 from hbmp_bench.maps.signals import ALL_RED_TIME_S, read_programs, yellow_time
 from hbmp_bench.scenarios import SUITES, TASKS, road_network, suite_episodes
@@ -236,3 +236,34 @@ def test_the_continuous_experts_speeds_in_bends_stay_physical(town):
                     assert 0.5 < record.peak_lateral_accel_mps2 <= 4.0, (name, task, index, record)
             finally:
                 env.close()
+
+
+CARLA_BOARD = Path(__file__).resolve().parents[2] / "leaderboards" / "carla"
+CARLA_ENTRIES = sorted(CARLA_BOARD.glob("*/*.json"))
+
+
+@pytest.mark.skipif(not {"Town01", "Town02"} <= set(REAL_TOWNS), reason="needs CARLA's Town01 and Town02")
+@pytest.mark.parametrize("entry", CARLA_ENTRIES or ["none"], ids=lambda p: getattr(p, "name", p))
+def test_the_carla_board_reproduces_from_carlas_files(entry):
+    """``leaderboards/carla``: CARLA's files, imported as its README says, give the nets the entries ran on (the
+    same bytes but netconvert's header) and the same episodes, so every entry passes the checks ``leaderboard
+    add`` runs against the suite: its episodes are the suite's on these imports, its figures its records'."""
+    import json
+    import re
+
+    from hbmp_bench.evaluation.results_check import verify_results
+    from hbmp_bench.maps import map_hash
+
+    for town in ("Town01", "Town02"):
+        import_map(CARLA_DIR / f"{town}.xodr", f"CARLA_{town}", like=town, lights="lawful")
+    doc = json.loads(entry.read_text(encoding="utf-8"))
+    assert doc["selection"]["towns"] == ["CARLA_Town01", "CARLA_Town02"] and doc["summary"]["episodes"] > 0
+    verify_results(doc, str(entry), against_suite=True)  # raises on anything that does not add up
+    forged = json.loads(json.dumps(doc))
+    forged["episodes"][0]["route_length_m"] += 10.0  # an episode that is not the import's
+    with pytest.raises(Exception, match="route length"):
+        verify_results(forged, "forged", against_suite=True)
+    readme = (CARLA_BOARD / "README.md").read_text(encoding="utf-8")
+    for town in ("CARLA_Town01", "CARLA_Town02"):
+        assert re.search(rf"`{town}` \\| `{map_info(town)['net_sha256']}`", readme), "the README names today's net"
+        assert map_hash(town) == map_info(town)["net_sha256"][:16]
