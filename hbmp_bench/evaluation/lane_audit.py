@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hbmp_bench.envs.vehicle import NOWHERE
 from hbmp_bench.maps import net_path
 from hbmp_bench.metrics import EgoFrame, InfractionDetector, LaneLocator
 from hbmp_bench.scenarios import SUITES, road_network, suite_episodes
@@ -29,7 +30,6 @@ AUDIT_SPEED_MPS = 3.0
 AUDIT_GRACE_S = 180.0
 """[s] of lights and insertion waits allowed on top of the drive (see ``AUDIT_SPEED_MPS``)."""
 
-_NOWHERE = np.array([np.inf, np.inf])
 _NONE = np.zeros(0)
 
 
@@ -153,7 +153,7 @@ def audit_lane_keeping(town: str, suites: tuple[str, ...] | list[str] | None = N
                 count += 1
                 sim.add_vehicle(vid, drive.route, lane_index=net.lanes[drive.start_lane].index, pos=drive.start_pos,
                                 vtype=EGO_TYPE)
-                drive.detector = InfractionDetector(locator, _NOWHERE, 0.0, np.inf)
+                drive.detector = InfractionDetector(locator, NOWHERE, 0.0, np.inf)
                 drive.inserted_s = sim.time
                 active[vid] = drive
             sim.step()

@@ -16,10 +16,12 @@ from pathlib import Path
 
 import numpy as np
 
+from .lanetypes import allows
+
 LATERAL_ACCEL_MAX_MPS2 = 4.0
 """Lateral acceleration a bend may ask of a car at its speed limit [m/s²] (the motion planner's own limit)."""
 CURVE_WINDOW_S = 1.0
-"""The bend is measured over the arc a car drives in this long [s] (as the episodes' lateral acceleration)."""
+"""The bend is measured over the arc a car drives in this long [s] (``metrics.episode.LATERAL_WINDOW_S`` is it)."""
 MIN_CURVE_SPEED_MPS = 2.0
 """No curve speed below this [m/s]: the tightest junction turns (radius ~1 m) are still driven."""
 SPEED_STEP_MPS = 0.1
@@ -27,18 +29,18 @@ SPEED_STEP_MPS = 0.1
 _SPACING_M = 0.25
 
 
-def _headings(shape: np.ndarray) -> tuple[np.ndarray, float]:
-    """Unwrapped headings [rad] of a polyline resampled every ``_SPACING_M``, and its arc length [m]."""
+def _headings(shape: np.ndarray) -> np.ndarray:
+    """Unwrapped headings [rad] of a polyline resampled every ``_SPACING_M``."""
     seg = np.hypot(*np.diff(shape, axis=0).T)
     pts = shape[np.append(True, seg > 1e-9)]
     if len(pts) < 2:
-        return np.zeros(0), 0.0
+        return np.zeros(0)
     arc = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
     s = np.append(np.arange(0.0, arc[-1], _SPACING_M), arc[-1])
     x, y = np.interp(s, arc, pts[:, 0]), np.interp(s, arc, pts[:, 1])
     keep = np.append(True, np.hypot(np.diff(x), np.diff(y)) > 1e-9)
     x, y = x[keep], y[keep]
-    return np.unwrap(np.arctan2(np.diff(y), np.diff(x))), float(arc[-1])
+    return np.unwrap(np.arctan2(np.diff(y), np.diff(x)))
 
 
 def max_turn(headings: np.ndarray, arc_m: float) -> float:
@@ -57,7 +59,7 @@ def curve_speed(shape: np.ndarray, limit_mps: float, a_max: float = LATERAL_ACCE
     """The highest speed [m/s] ≤ ``limit_mps`` at which the lane ``shape`` (N, 2) [m] asks at most ``a_max``
     [m/s²] of lateral acceleration: speed × (largest heading change within speed × ``window_s`` of arc) /
     ``window_s``, in steps of ``SPEED_STEP_MPS``, never below ``MIN_CURVE_SPEED_MPS`` (nor above the limit)."""
-    headings, _ = _headings(np.asarray(shape, dtype=float)[:, :2])
+    headings = _headings(np.asarray(shape, dtype=float)[:, :2])
     v = float(limit_mps)
     floor = min(MIN_CURVE_SPEED_MPS, v)
     while v > floor and v * max_turn(headings, v * window_s) / window_s > a_max:
@@ -67,13 +69,6 @@ def curve_speed(shape: np.ndarray, limit_mps: float, a_max: float = LATERAL_ACCE
 
 _LANE = re.compile(r'<lane id="(?P<id>[^"]+)"(?P<attrs>[^>]*)>')
 _ATTR = re.compile(r'(?P<key>[\w:]+)="(?P<value>[^"]*)"')
-
-
-def _drivable(attrs: dict[str, str]) -> bool:
-    if "allow" in attrs:
-        return "passenger" in attrs["allow"].split() or "all" in attrs["allow"].split()
-    disallow = attrs.get("disallow", "").split()
-    return "passenger" not in disallow and "all" not in disallow
 
 
 def limit_curve_speeds(path: str | Path, a_max: float = LATERAL_ACCEL_MAX_MPS2) -> int:
@@ -86,7 +81,7 @@ def limit_curve_speeds(path: str | Path, a_max: float = LATERAL_ACCEL_MAX_MPS2) 
     def lane(m: re.Match) -> str:
         nonlocal lowered
         attrs = {a.group("key"): a.group("value") for a in _ATTR.finditer(m.group("attrs"))}
-        if "speed" not in attrs or "shape" not in attrs or not _drivable(attrs):
+        if "speed" not in attrs or "shape" not in attrs or not allows(attrs, "passenger"):
             return m.group(0)
         limit = float(attrs["speed"])
         shape = np.array([[float(c) for c in p.split(",")[:2]] for p in attrs["shape"].split()])

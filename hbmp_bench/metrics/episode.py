@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from hbmp_bench.maps.curves import CURVE_WINDOW_S
 from hbmp_bench.metrics.detectors import StepEvents
 from hbmp_bench.metrics.records import EpisodeRecord, driving_score
 
@@ -77,10 +78,10 @@ class EpisodeId:
     route_length_m: float
 
 
-LATERAL_WINDOW_S = 1.0
+LATERAL_WINDOW_S = CURVE_WINDOW_S
 """Lateral acceleration is measured as speed × yaw rate, both averaged over this window [s]: what a car's
 occupants feel in a bend, not the steps of a polyline (SUMO's heading turns at a lane shape's vertices, and
-its lane changes move a car sideways without turning it)."""
+its lane changes move a car sideways without turning it); the window of an import's curve speeds."""
 
 
 class LateralAcceleration:
