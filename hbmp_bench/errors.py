@@ -16,6 +16,16 @@ class UserError(ValueError):
     """
 
 
+class ConfigError(UserError):
+    """A configuration that cannot hold: a field out of range, two fields that contradict each other.
+
+    Raised by the ``__post_init__`` checks of the package's frozen configuration dataclasses (env,
+    reward, training, evaluation configs). The message names the field, the value and what is
+    allowed. It is a ``UserError``, so ``hbmp-bench`` prints it as one line, and thereby still a
+    ``ValueError`` for callers that catch that.
+    """
+
+
 class Interrupted(KeyboardInterrupt):
     """Ctrl-C, raised after the interrupted work stopped cleanly (children ended, files whole).
 
