@@ -191,7 +191,8 @@ def bwrap_argv(command: Sequence[str], *, readable: Iterable[str] = (), writable
         argv += ["--bind", path, path]
     # the folders bwrap made to hold those (private to root, when root runs it) may be searched by anyone
     made = {str(a) for p in [*shown, *rw] for a in Path(p).parents} - {"/", "/tmp", "/usr"}
-    made = {m for m in made if not any(m == s or m.startswith(s.rstrip("/") + "/") for s in [*shown, *rw, "/usr", "/tmp"])}
+    # (inside the private /tmp too: a clone or virtualenv under the host's /tmp is shown there)
+    made = {m for m in made if not any(m == s or m.startswith(s.rstrip("/") + "/") for s in [*shown, *rw, "/usr"])}
     for path in sorted(made):
         argv += ["--chmod", "0755", path]
     return [*argv, "--chdir", "/tmp", "--", *command]
