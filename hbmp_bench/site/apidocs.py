@@ -1,0 +1,80 @@
+"""The docs site's API reference: one page per package room, one section per public module.
+
+Used as a mkdocs hook (``mkdocs.yml``: ``hooks``): :func:`on_files` adds the pages ``api/<room>.md``
+at build time, each a list of mkdocstrings ``:::`` blocks, so a module added to a room is in the
+reference without anyone editing a page. The modules are found from the package's files (nothing
+is imported here; mkdocstrings reads the sources).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+PACKAGE_DIR = Path(__file__).resolve().parents[1]
+"""The ``hbmp_bench`` package folder."""
+
+API_ROOMS: dict[str, str] = {
+    "envs": "Environments: the PettingZoo traffic env, the gymnasium behavior and control envs, observations.",
+    "agents": "The agent protocol and registry, the expert, the simple and the learned agents.",
+    "evaluation": "Suite runs, the sandboxed agent process, leaderboards, audits.",
+    "training": "DAgger, PPO on rsl-rl, the networks, the training session.",
+    "metrics": "Detectors, episode records, summaries and reports.",
+    "scenarios": "Tasks, suites and their deterministic episode lists.",
+    "planning": "The behavior-conditioned sampling motion planner (pure numpy).",
+    "maps": "The towns, their statistics and the import of OpenDRIVE and SUMO nets.",
+}
+"""Rooms documented in the API reference (page ``api/<room>.md``) and the line heading each page."""
+
+
+def room_modules(room: str) -> list[str]:
+    """Dotted names of ``room``'s public modules: the package itself, then each ``.py`` file and
+    sub-package whose name does not start with ``_``, sorted."""
+    folder = PACKAGE_DIR / room
+    if not (folder / "__init__.py").is_file():
+        raise ValueError(f"no package hbmp_bench.{room} in {PACKAGE_DIR}")
+    names = [f"hbmp_bench.{room}"]
+    for path in sorted(folder.iterdir()):
+        if path.name.startswith("_"):
+            continue
+        if path.suffix == ".py":
+            names.append(f"hbmp_bench.{room}.{path.stem}")
+        elif path.is_dir() and (path / "__init__.py").is_file():
+            names.extend(_sub_package(path))
+    return names
+
+
+def _sub_package(folder: Path) -> list[str]:
+    prefix = "hbmp_bench." + ".".join(folder.relative_to(PACKAGE_DIR).parts)
+    names = [prefix]
+    for path in sorted(folder.iterdir()):
+        if path.suffix == ".py" and not path.name.startswith("_"):
+            names.append(f"{prefix}.{path.stem}")
+    return names
+
+
+def api_page(room: str) -> str:
+    """Markdown of ``api/<room>.md``: the room's line, then one mkdocstrings block per module (the
+    package's own block without members: its names are documented where they are defined)."""
+    modules = room_modules(room)
+    parts = [f"# `hbmp_bench.{room}`\n", f"{API_ROOMS[room]}\n"]
+    parts.append(f"::: hbmp_bench.{room}\n    options:\n      members: false\n      show_root_heading: false\n")
+    parts += [f"::: {name}\n" for name in modules[1:]]
+    return "\n".join(parts)
+
+
+def api_pages() -> dict[str, str]:
+    """``{"api/<room>.md": markdown}`` for every room of :data:`API_ROOMS`, and ``api/index.md``."""
+    pages = {f"api/{room}.md": api_page(room) for room in API_ROOMS}
+    lines = ["# API reference\n", "Generated from the docstrings of the package's modules, one page per room:\n"]
+    lines += [f"- [`hbmp_bench.{room}`]({room}.md): {text}" for room, text in API_ROOMS.items()]
+    pages["api/index.md"] = "\n".join(lines) + "\n"
+    return pages
+
+
+def on_files(files, config):
+    """mkdocs hook: add the generated API pages to the site's files."""
+    from mkdocs.structure.files import File
+
+    for path, text in api_pages().items():
+        files.append(File.generated(config, path, content=text))
+    return files
