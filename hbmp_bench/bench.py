@@ -57,9 +57,10 @@ from typing import Any
 import numpy as np
 
 from hbmp_bench import __version__
+from hbmp_bench.errors import ConfigError
 from hbmp_bench.rollout import EpisodeHooks, run_episode
+from hbmp_bench.vocabulary import FIDELITIES
 
-FIDELITIES = ("event", "continuous")
 HIGHWAY_ENVS = ("highway-fast-v0", "intersection-v0")
 IMPORT_CODE = "import time; t = time.perf_counter(); import hbmp_bench; print(time.perf_counter() - t)"
 """What ``import_s`` times, in a fresh interpreter."""
@@ -95,7 +96,7 @@ class Targets:
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
             if not isinstance(value, (int, float)) or value != value:
-                raise ValueError(f"target {f.name} must be a number, got {value!r}")
+                raise ConfigError(f"target {f.name} must be a number, got {value!r}")
 
 
 @dataclass(frozen=True)
@@ -133,21 +134,21 @@ class BenchConfig:
 
     def __post_init__(self):
         if not self.towns:
-            raise ValueError("towns must not be empty")
+            raise ConfigError("towns must not be empty")
         if self.raw_steps <= 0 or self.env_seconds <= 0 or self.scaling_seconds <= 0:
-            raise ValueError("raw_steps, env_seconds and scaling_seconds must be > 0")
+            raise ConfigError("raw_steps, env_seconds and scaling_seconds must be > 0")
         if self.highway_seconds < 0:
-            raise ValueError("highway_seconds must be >= 0")
+            raise ConfigError("highway_seconds must be >= 0")
         if any(n <= 0 for n in self.scaling_workers):
-            raise ValueError(f"scaling_workers must be > 0, got {self.scaling_workers}")
+            raise ConfigError(f"scaling_workers must be > 0, got {self.scaling_workers}")
         if any(n <= 0 for n in self.ray_workers):
-            raise ValueError(f"ray_workers must be > 0, got {self.ray_workers}")
+            raise ConfigError(f"ray_workers must be > 0, got {self.ray_workers}")
         if self.scaling_fidelity not in FIDELITIES:
-            raise ValueError(f"scaling_fidelity must be one of {FIDELITIES}, got {self.scaling_fidelity!r}")
+            raise ConfigError(f"scaling_fidelity must be one of {FIDELITIES}, got {self.scaling_fidelity!r}")
         if self.import_repeats < 0:
-            raise ValueError(f"import_repeats must be >= 0, got {self.import_repeats}")
+            raise ConfigError(f"import_repeats must be >= 0, got {self.import_repeats}")
         if not isinstance(self.targets, Targets):
-            raise ValueError(f"targets must be a Targets, got {type(self.targets).__name__}")
+            raise ConfigError(f"targets must be a Targets, got {type(self.targets).__name__}")
 
     @classmethod
     def quick(cls) -> "BenchConfig":
@@ -675,6 +676,6 @@ def add_commands(subparsers) -> None:
                    help="instead: time the parts of the env's step against raw SUMO and cProfile it for SECONDS; "
                         "print both")
     p.add_argument("--town", default=None, help="the town of --profile (default: the first measured town)")
-    p.add_argument("--fidelity", choices=("continuous", "event"), default="continuous",
+    p.add_argument("--fidelity", choices=FIDELITIES, default="continuous",
                    help="the fidelity of --profile (default: continuous)")
     p.set_defaults(func=_cmd_bench)

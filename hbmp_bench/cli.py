@@ -3,15 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import dis
 import importlib
 import json
-import os
 import sys
-import sysconfig
 from pathlib import Path
 
 from hbmp_bench.errors import Interrupted, UnknownNameError, UserError
+from hbmp_bench.vocabulary import FIDELITIES
 
 COMMAND_MODULES: tuple[str, ...] = ("hbmp_bench.render.commands", "hbmp_bench.transfer.commands",
                                     "hbmp_bench.evaluation.commands", "hbmp_bench.training.commands", "hbmp_bench.bench")
@@ -71,7 +69,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     suite = get_suite(args.suite)
     n = min(args.episodes, suite.episodes_per_task)
     if args.episodes <= 0:
-        raise ValueError(f"--episodes must be > 0, got {args.episodes}")
+        raise UserError(f"--episodes must be > 0, got {args.episodes}")
     records = run_jobs([Job(suite.name, town, task, args.agent, tuple(range(n)), args.fidelity)],
                        workers=1, progress=not args.json)
     summary = {"env": args.env, "town": town, "agent": args.agent, "suite": suite.name, **summarize(records)}
@@ -183,7 +181,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--agent", default="expert", help="registry name or module:Class")
     p.add_argument("--episodes", type=int, default=5, help="first N episodes of the suite for this town and task")
     p.add_argument("--suite", default="corl2017", help="episode suite (hbmp-bench list shows them)")
-    p.add_argument("--fidelity", default=None, choices=("continuous", "event"),
+    p.add_argument("--fidelity", default=None, choices=FIDELITIES,
                    help="default: the env's (continuous, the motion planner)")
     p.add_argument("--json", action="store_true", help="print a JSON summary with every episode record")
     p.set_defaults(func=_cmd_run)
@@ -227,35 +225,20 @@ EXIT_USER_ERROR = 2
 EXIT_INTERRUPTED = 130
 """Exit code after Ctrl-C (128 + SIGINT, as a shell reports it)."""
 
-_PACKAGE_DIR = os.path.dirname(os.path.abspath(__file__)) + os.sep
-_STDLIB_DIR = os.path.abspath(sysconfig.get_paths()["stdlib"]) + os.sep
-_LIBRARY_DIRS = (os.sep + "site-packages" + os.sep, os.sep + "dist-packages" + os.sep)
+USER_ERRORS: tuple[type[BaseException], ...] = (UserError, FileNotFoundError, json.JSONDecodeError)
+"""What a user's mistake raises: ``UserError`` (and so ``ConfigError``, ``UnknownNameError``,
+``CheckpointError``), a file that is not there, and a user's JSON file that does not parse."""
 
 
 def is_user_error(exc: BaseException) -> bool:
     """Whether ``exc`` is a mistake in the user's input (one line, no traceback) rather than a bug.
 
-    ``UserError`` (and so ``UnknownNameError``) and ``FileNotFoundError`` are. A plain ``ValueError``
-    is when the standard library raised it (a JSON file that does not parse) or a ``raise``
-    statement of this package did (configuration is validated with ``ValueError``). One raised
-    inside numpy, torch or another library, or by a failing call in this package
-    (``array.reshape``), is a bug and keeps its traceback.
+    Decided by type alone (:data:`USER_ERRORS`): the package raises ``UserError`` or one of its
+    subclasses where user input enters it (options, files, plug-ins) and ``ConfigError`` from the
+    configuration checks; any other exception, a plain ``ValueError`` included, is a bug and keeps
+    its traceback.
     """
-    if isinstance(exc, (UserError, FileNotFoundError)):
-        return True
-    if not isinstance(exc, ValueError) or exc.__traceback__ is None:
-        return False
-    tb = exc.__traceback__
-    while tb.tb_next is not None:
-        tb = tb.tb_next
-    code = tb.tb_frame.f_code
-    where = os.path.abspath(code.co_filename)
-    if not where.startswith(_PACKAGE_DIR):
-        if any(d in where for d in _LIBRARY_DIRS):
-            return False
-        if where.startswith(_STDLIB_DIR):
-            return True
-    return any(i.offset == tb.tb_lasti and i.opname == "RAISE_VARARGS" for i in dis.get_instructions(code))
+    return isinstance(exc, USER_ERRORS)
 
 
 def _one_line(text: str) -> str:

@@ -205,7 +205,7 @@ def test_bugs_keep_their_traceback(monkeypatch):
 
 
 def test_is_user_error():
-    from hbmp_bench.errors import UnknownNameError, UserError
+    from hbmp_bench.errors import ConfigError, UnknownNameError, UserError
 
     def raised(fn):
         try:
@@ -224,9 +224,10 @@ def test_is_user_error():
     assert not cli.is_user_error(RuntimeError("bug"))
 
     def validate():
-        raise ValueError("speed must be >= 0")
+        raise ConfigError("speed must be >= 0")
 
-    assert cli.is_user_error(raised(validate))  # a raise statement: validation
+    assert cli.is_user_error(raised(validate))  # a configuration check
+    assert not cli.is_user_error(ValueError("speed must be >= 0"))  # untyped: a bug, whoever raised it
 
 
 def test_train_resume_hint_follows_what_the_interrupt_left(tmp_path):

@@ -17,6 +17,8 @@ import collections
 from dataclasses import dataclass, field
 from typing import Any
 
+from hbmp_bench.errors import UserError
+
 LIGHT_NEAR_M = 40.0
 """A light's signal is the situation of a decision when its stop line is this close [m]."""
 STANDING_MPS = 0.5
@@ -78,7 +80,7 @@ def merged_env_kwargs(agents: dict[str, Any]) -> dict[str, Any]:
             if key == "privileged":  # the privileged scene only adds to info: anyone may have it
                 merged[key] = merged.get(key, False) or bool(value)
             elif key in merged and merged[key] != value:
-                raise ValueError(f"{owner[key]} and {name} need different observations ({key}: {merged[key]!r} vs "
+                raise UserError(f"{owner[key]} and {name} need different observations ({key}: {merged[key]!r} vs "
                                  f"{value!r}): compare agents trained on the same observation")
             else:
                 merged[key], owner[key] = value, name
@@ -96,9 +98,9 @@ def agreement(driver: str, others: list[str], suite: str, town: str, task: str, 
     from hbmp_bench.rollout import EpisodeHooks, run_episode
 
     if not others:
-        raise ValueError("give at least one agent to compare with the driver (--with)")
+        raise UserError("give at least one agent to compare with the driver (--with)")
     if episodes < 1:
-        raise ValueError(f"episodes must be >= 1, got {episodes}")
+        raise UserError(f"episodes must be >= 1, got {episodes}")
     agents = {spec: load_agent(spec) for spec in dict.fromkeys([driver, *others])}
     options = {} if fidelity is None else {"fidelity": fidelity}
     env = BehaviorEnv(town=town, task=task, suite=suite, **options, **merged_env_kwargs(agents))

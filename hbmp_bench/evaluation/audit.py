@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from hbmp_bench.errors import UserError
 from hbmp_bench.evaluation.leaderboard import EPISODE_COLUMNS, check_results
 from hbmp_bench.evaluation.results_check import commitment, verify_results
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, is_privileged, with_agent_env
@@ -105,11 +106,11 @@ def draw(doc: dict, sample: int, seed: int | None = None, max_sim_s: float | Non
     randomness), among those that did not end in a ``sim_error`` and, with ``max_sim_s``, that
     lasted at most that many simulated seconds [s] (a cheap audit, e.g. in CI)."""
     if sample < 1:
-        raise ValueError(f"sample must be >= 1 episodes, got {sample}")
+        raise UserError(f"sample must be >= 1 episodes, got {sample}")
     pool = [e for e in doc["episodes"] if e["end_reason"] != SIM_ERROR
             and (max_sim_s is None or e["duration_s"] <= max_sim_s)]
     if not pool:
-        raise ValueError(f"the entry has no episode to replay{f' of at most {max_sim_s} s' if max_sim_s else ''}")
+        raise UserError(f"the entry has no episode to replay{f' of at most {max_sim_s} s' if max_sim_s else ''}")
     rng = random.Random(seed) if seed is not None else random.SystemRandom()
     return rng.sample(pool, min(sample, len(pool)))
 
@@ -149,9 +150,9 @@ def audit(
     if doc["salted"]:
         salt = provenance.get("salt") or ""
         if not salt:
-            raise ValueError(f"{path} is salted and its salt is not revealed yet: it cannot be replayed")
+            raise UserError(f"{path} is salted and its salt is not revealed yet: it cannot be replayed")
         if commitment(salt) != provenance.get("salt_commitment"):
-            raise ValueError(f"{path}: its salt does not match its salt_commitment")
+            raise UserError(f"{path}: its salt does not match its salt_commitment")
     chosen = draw(doc, sample, seed, max_sim_s)
     limits = limits or RunnerLimits()
     description = describe_agent(agent, limits)

@@ -7,6 +7,8 @@ import functools
 import json
 from pathlib import Path
 
+from hbmp_bench.errors import UserError
+
 
 def _missing_extra_is_user_error(func):
     """A missing optional dependency (the ray extra) becomes a ValueError: exit code 2 with its message."""
@@ -18,7 +20,7 @@ def _missing_extra_is_user_error(func):
         except ImportError as exc:
             if "hbmp-bench[" not in str(exc):
                 raise
-            raise ValueError(str(exc)) from exc
+            raise UserError(str(exc)) from exc
 
     return wrapper
 
@@ -160,7 +162,7 @@ def _cmd_agreement(args: argparse.Namespace) -> int:
     town = check_town(args.town) if args.town else suite.towns[0]
     task = args.task or ("NavigationDynamic" if "NavigationDynamic" in suite.tasks else suite.tasks[0])
     if task not in suite.tasks:
-        raise ValueError(f"suite {suite.name} has no task {task!r}; its tasks: {', '.join(suite.tasks)}")
+        raise UserError(f"suite {suite.name} has no task {task!r}; its tasks: {', '.join(suite.tasks)}")
     results = agreement(args.agent, args.others, suite.name, town, task, args.episodes, fidelity=args.fidelity,
                         progress=not args.json)
     if args.json:

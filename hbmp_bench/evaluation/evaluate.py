@@ -28,7 +28,7 @@ from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from hbmp_bench.errors import Interrupted, UnknownNameError, UserError
+from hbmp_bench.errors import ConfigError, Interrupted, UnknownNameError, UserError
 from hbmp_bench.evaluation.channel import AgentDescription
 from hbmp_bench.evaluation.integrity import RecordsLedger, RecordsSeal, TamperedError, quarantine, records_lock
 from hbmp_bench.evaluation.pool import AgentBuildError, EpisodeOutcome, EpisodePool, describe_agent
@@ -191,7 +191,7 @@ def evaluate(
     """
     limits = limits or RunnerLimits()
     if limits.max_decisions is not None:
-        raise ValueError("evaluate runs whole episodes: limits.max_decisions must be None")
+        raise ConfigError("evaluate runs whole episodes: limits.max_decisions must be None")
     if backend not in BACKENDS:
         raise UnknownNameError("backend", backend, BACKENDS)
     _check_workers(workers)

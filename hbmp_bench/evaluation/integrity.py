@@ -42,7 +42,7 @@ from hbmp_bench.locks import Busy, exclusive_lock
 from hbmp_bench.metrics.records import EpisodeRecord, append_record, parse_records, record_line
 
 
-class TamperedError(ValueError):
+class TamperedError(UserError):
     """A records file or leaderboard folder changed behind the evaluator's back during a run."""
 
 

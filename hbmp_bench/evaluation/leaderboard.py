@@ -38,6 +38,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 from hbmp_bench import __version__
+from hbmp_bench.errors import UserError
 from hbmp_bench.evaluation.evaluate import code_fingerprint, evaluate
 from hbmp_bench.evaluation.integrity import BoardSnapshot
 from hbmp_bench.evaluation.provenance import git_commit, library_versions, machine_description, utc_now
@@ -47,6 +48,7 @@ from hbmp_bench.metrics import report
 from hbmp_bench.metrics.records import DRIVING_SCORE_DEFINITION, SIM_ERROR, EpisodeRecord
 from hbmp_bench.metrics.summary import summarize
 from hbmp_bench.scenarios import TASK_LABELS, TASKS, get_suite
+from hbmp_bench.vocabulary import INFRACTION_KINDS
 
 RESULTS_FORMAT = 3
 """Version of the results file layout (2: the ``privileged`` flag; 3: the ``salted`` flag and the
@@ -54,14 +56,14 @@ salt's commitment). A format-1 file reads as privileged: before the flag every a
 the privileged scene fields; format 1 and 2 files read as unsalted (salted mode came with 3)."""
 
 EPISODE_COLUMNS = (
-    "town", "task", "episode", "seed", "success", "route_completion", "driving_score", "collision_vehicle",
-    "collision_pedestrian", "collision_other", "wrong_lane", "off_road", "red_light", "timeout", "duration_s",
+    "town", "task", "episode", "seed", "success", "route_completion", "driving_score", *INFRACTION_KINDS, "timeout",
+    "duration_s",
     "distance_m", "route_length_m", "decisions", "end_reason", "error",
 )
 """Per-episode fields kept in a results file."""
 
 
-class StaleResultsError(ValueError):
+class StaleResultsError(UserError):
     """A results file made for another definition of its suite."""
 
 
@@ -190,19 +192,19 @@ def check_results(doc: dict, source: str = "results") -> dict:
     if isinstance(doc, dict) and doc.get("format") == 2:
         doc = {**doc, "format": RESULTS_FORMAT, "salted": False}
     if not isinstance(doc, dict) or doc.get("format") != RESULTS_FORMAT or not isinstance(doc.get("suite"), str):
-        raise ValueError(f"{source} is not a leaderboard results file (format {RESULTS_FORMAT})")
+        raise UserError(f"{source} is not a leaderboard results file (format {RESULTS_FORMAT})")
     if not isinstance(doc.get("provenance"), dict):
-        raise ValueError(f"{source} has no provenance")
+        raise UserError(f"{source} has no provenance")
     if not isinstance(doc.get("privileged"), bool):
-        raise ValueError(f"{source} has no privileged flag (true or false)")
+        raise UserError(f"{source} has no privileged flag (true or false)")
     episodes = doc.get("episodes")
     if not isinstance(episodes, list) or not all(isinstance(e, dict) for e in episodes):
-        raise ValueError(f"{source} has no list of episodes")
+        raise UserError(f"{source} has no list of episodes")
     sim_errors = sum(e.get("end_reason") == SIM_ERROR for e in episodes)
     if doc.get("sim_errors") != sim_errors:
-        raise ValueError(f"{source} says sim_errors={doc.get('sim_errors')!r} but its episodes hold {sim_errors}")
+        raise UserError(f"{source} says sim_errors={doc.get('sim_errors')!r} but its episodes hold {sim_errors}")
     if doc.get("complete") and (sim_errors or doc.get("subset") or len(episodes) != doc.get("expected_episodes")):
-        raise ValueError(f"{source} says complete, but it has {len(episodes)} of {doc.get('expected_episodes')} "
+        raise UserError(f"{source} says complete, but it has {len(episodes)} of {doc.get('expected_episodes')} "
                          f"episodes, {sim_errors} sim errors, subset={doc.get('subset')!r}")
     name_issues = name_problems(doc)
     if name_issues:
@@ -251,7 +253,7 @@ def load_entries(board_dir: str | os.PathLike, suite: str, skip: str | None = No
     for path in sorted(p for p in folder.glob("*.json") if p.name != skip):
         doc = check_results(json.loads(path.read_text(encoding="utf-8")), str(path))
         if doc["suite"] != get_suite(suite).name:
-            raise ValueError(f"{path} holds results of suite {doc['suite']!r}, not {suite!r}")
+            raise UserError(f"{path} holds results of suite {doc['suite']!r}, not {suite!r}")
         verify_results(doc, str(path), against_suite=False)
         own = entry_path(board_dir, doc["suite"], doc["agent"], doc["subset"], doc["fidelity"]).name
         if path.name != own:
@@ -378,7 +380,7 @@ def add_results(path: str | os.PathLike, board_dir: str | os.PathLike) -> Path:
     try:
         raw = json.loads(source.read_text(encoding="utf-8"), parse_constant=_no_constant)
     except json.JSONDecodeError as exc:
-        raise ValueError(f"{source} is not JSON: {exc}") from None
+        raise UserError(f"{source} is not JSON: {exc}") from None
     doc = check_results(raw, str(source))
     recomputed = verify_results(doc, str(source), against_suite=True)
     target = entry_path(board_dir, doc["suite"], doc["agent"], doc["subset"], doc["fidelity"])
@@ -394,7 +396,7 @@ def add_results(path: str | os.PathLike, board_dir: str | os.PathLike) -> Path:
 
 
 def _no_constant(name: str):
-    raise ValueError(f"results files hold finite numbers only, not {name}")
+    raise UserError(f"results files hold finite numbers only, not {name}")
 
 
 def submit(

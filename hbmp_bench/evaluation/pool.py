@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from multiprocessing import reduction
 from multiprocessing.connection import Connection, wait
 
-from hbmp_bench.errors import UserError
+from hbmp_bench.errors import ConfigError, UserError
 from hbmp_bench.evaluation import channel
 from hbmp_bench.evaluation.agent_process import agent_main
 from hbmp_bench.evaluation.namespaces import (AgentUidLease, SandboxedProcess, SandboxUnavailable, agent_files,
@@ -96,7 +96,7 @@ def sandbox_context(start_method: str | None, limits: RunnerLimits, agent: str |
     """
     start_method = start_method or default_start_method()
     if start_method not in ("forkserver", "spawn"):
-        raise ValueError(f"start_method must be 'forkserver' or 'spawn', got {start_method!r}")
+        raise ConfigError(f"start_method must be 'forkserver' or 'spawn', got {start_method!r}")
     agent_account(limits.agent_user)
     protect_process()
     ctx = mp.get_context(start_method)
@@ -410,7 +410,7 @@ class EpisodePool:
     def __init__(self, workers: int = 1, limits: RunnerLimits | None = None, start_method: str | None = None,
                  descriptions: Mapping[str, channel.AgentDescription] | None = None):
         if workers <= 0:
-            raise ValueError(f"workers must be > 0, got {workers}")
+            raise ConfigError(f"workers must be > 0, got {workers}")
         self.workers = workers
         self.limits = limits or RunnerLimits()
         self.ctx = sandbox_context(start_method, self.limits)

@@ -35,8 +35,9 @@ import re
 from collections import Counter
 from pathlib import Path
 
-from hbmp_bench.errors import UnknownNameError
+from hbmp_bench.errors import UnknownNameError, UserError
 from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, driving_score
+from hbmp_bench.vocabulary import COLLISION_KINDS, FIDELITIES, INFRACTION_KINDS, VIOLATION_KINDS
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.:+-]{0,127}")
 """What a suite, fidelity or agent name of a results file may be: letters, digits and ``_ . : + -``,
@@ -56,15 +57,11 @@ HEX64 = re.compile(r"[0-9a-f]{64}")
 SALT = re.compile(r"[0-9a-f]{32,64}")
 """A revealed salt: 16 to 32 random bytes in lowercase hex (``evaluate.new_salt`` makes 16)."""
 
-_INT_FIELDS = ("episode", "seed", "collision_vehicle", "collision_pedestrian", "collision_other", "wrong_lane",
-               "off_road", "red_light", "decisions")
+_INT_FIELDS = ("episode", "seed", *INFRACTION_KINDS, "decisions")
 _FLOAT_FIELDS = ("route_completion", "driving_score", "duration_s", "distance_m", "route_length_m")
-_INFRACTIONS = ("collision_vehicle", "collision_pedestrian", "collision_other", "wrong_lane", "off_road", "red_light")
-_VIOLATIONS = ("wrong_lane", "off_road", "red_light")
-_COLLISIONS = ("collision_vehicle", "collision_pedestrian", "collision_other")
 
 
-class ForgedResultsError(ValueError):
+class ForgedResultsError(UserError):
     """A results file whose claims do not follow from its episodes and its suite (see the module
     docstring); ``problems`` lists each one."""
 
@@ -82,7 +79,7 @@ def commitment(salt: str) -> str:
 def check_name(kind: str, value: object) -> str:
     """``value`` if it is a name that may reach a file path (:data:`NAME_PATTERN`), else ValueError."""
     if not isinstance(value, str) or not NAME_PATTERN.fullmatch(value) or ".." in value:
-        raise ValueError(f"{kind} {value!r} is not a valid name: letters, digits and _ . : + - only, "
+        raise UserError(f"{kind} {value!r} is not a valid name: letters, digits and _ . : + - only, "
                          f"at most 128, not starting with '.', no '..' or '/'")
     return value
 
@@ -90,7 +87,6 @@ def check_name(kind: str, value: object) -> str:
 def name_problems(doc: dict) -> list[str]:
     """Problems of the fields that reach a path: ``suite`` (a registered suite), ``fidelity`` (one
     of the world's) and ``agent`` (:data:`NAME_PATTERN`)."""
-    from hbmp_bench.envs.drivers import FIDELITIES
     from hbmp_bench.scenarios import SUITES
 
     problems = []
@@ -113,7 +109,7 @@ def contained(path: Path, folder: Path) -> Path:
     """``path`` if, resolved, it lies inside ``folder`` (resolved), else ValueError."""
     resolved, root = path.resolve(), folder.resolve()
     if resolved.parent != root and root not in resolved.parents:
-        raise ValueError(f"{path} resolves to {resolved}, outside the board folder {root}")
+        raise UserError(f"{path} resolves to {resolved}, outside the board folder {root}")
     return path
 
 
@@ -158,8 +154,8 @@ def record_problems(row: dict, *, end_on_violation: bool, end_on_collision: bool
         if abs(expected - row["driving_score"]) > SCORE_TOLERANCE:
             problems.append(f"{where} has driving score {row['driving_score']}, but its route completion and "
                             f"infractions give {expected:.3f}")
-    collisions = sum(row[k] for k in _COLLISIONS)
-    violations = sum(row[k] for k in _VIOLATIONS)
+    collisions = sum(row[k] for k in COLLISION_KINDS)
+    violations = sum(row[k] for k in VIOLATION_KINDS)
     if reason == "collision" and not collisions:
         problems.append(f"{where} ends in a collision but counts none")
     if reason == "violation" and not violations:

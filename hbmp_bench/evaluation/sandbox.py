@@ -56,6 +56,8 @@ import time
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from hbmp_bench.errors import ConfigError
+
 PR_SET_DUMPABLE = 4
 PR_SET_CHILD_SUBREAPER = 36
 PR_SET_NO_NEW_PRIVS = 38
@@ -101,10 +103,10 @@ def agent_account(user: str | None) -> pwd.struct_passwd | None:
     try:
         account = pwd.getpwnam(user)
     except KeyError:
-        raise ValueError(f"agent_user {user!r} does not exist on this machine: name an unprivileged user "
+        raise ConfigError(f"agent_user {user!r} does not exist on this machine: name an unprivileged user "
                          "(the agent process runs as it), or None to run agents as root") from None
     if account.pw_uid == 0:
-        raise ValueError(f"agent_user {user!r} is root: name an unprivileged user, or None to run agents as root")
+        raise ConfigError(f"agent_user {user!r} is root: name an unprivileged user, or None to run agents as root")
     return account
 
 

@@ -10,6 +10,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from hbmp_bench.errors import ConfigError, UserError
 from hbmp_bench.scenarios import TASKS, check_task, check_town, get_suite
 
 if TYPE_CHECKING:
@@ -129,38 +130,38 @@ class RunnerLimits:
     def __post_init__(self):
         for name in ("decision_timeout_s", "agent_start_timeout_s", "start_timeout_s", "watchdog_s"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+                raise ConfigError(f"{name} must be > 0, got {getattr(self, name)}")
         for name in ("agent_memory_mb", "agent_cpu_s", "agent_file_mb", "agent_processes"):
             value = getattr(self, name)
             if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value <= 0):
-                raise ValueError(f"{name} must be a positive integer or None, got {value!r}")
+                raise ConfigError(f"{name} must be a positive integer or None, got {value!r}")
         if self.agent_user is not None and (not isinstance(self.agent_user, str) or not self.agent_user.strip()):
-            raise ValueError(f"agent_user must be a user name or None, got {self.agent_user!r}")
+            raise ConfigError(f"agent_user must be a user name or None, got {self.agent_user!r}")
         object.__setattr__(self, "agent_preload", tuple(self.agent_preload))
         if not isinstance(self.trust_agent, bool):
-            raise ValueError(f"trust_agent must be True or False, got {self.trust_agent!r}")
+            raise ConfigError(f"trust_agent must be True or False, got {self.trust_agent!r}")
         for name in ("agent_env", "agent_readable", "agent_writable"):
             value = getattr(self, name)
             if isinstance(value, str) or not all(isinstance(v, str) and v for v in value):
-                raise ValueError(f"{name} must be a sequence of non-empty strings, got {value!r}")
+                raise ConfigError(f"{name} must be a sequence of non-empty strings, got {value!r}")
             object.__setattr__(self, name, tuple(value))
         for name in ("agent_readable", "agent_writable"):
             relative = [p for p in getattr(self, name) if not os.path.isabs(p)]
             if relative:
-                raise ValueError(f"{name} must name absolute paths, got {relative}")
+                raise ConfigError(f"{name} must name absolute paths, got {relative}")
         if not self.episode_wall_factor > 0 or not self.episode_wall_extra_s >= 0:
-            raise ValueError(f"episode_wall_factor must be > 0 and episode_wall_extra_s >= 0, got "
+            raise ConfigError(f"episode_wall_factor must be > 0 and episode_wall_extra_s >= 0, got "
                              f"{self.episode_wall_factor} and {self.episode_wall_extra_s}")
         bad = [m for m in self.agent_preload if not isinstance(m, str) or not m.replace(".", "").replace("_", "").isalnum()]
         if bad:
-            raise ValueError(f"agent_preload must name modules (a.b.c), got {bad}")
+            raise ConfigError(f"agent_preload must name modules (a.b.c), got {bad}")
         if self.retries < 0:
-            raise ValueError(f"retries must be >= 0, got {self.retries}")
+            raise ConfigError(f"retries must be >= 0, got {self.retries}")
         if self.max_decisions is not None and self.max_decisions <= 0:
-            raise ValueError(f"max_decisions must be > 0 or None, got {self.max_decisions}")
+            raise ConfigError(f"max_decisions must be > 0 or None, got {self.max_decisions}")
         object.__setattr__(self, "env_kwargs", tuple(sorted(dict(self.env_kwargs).items())))
         if self.env_factory is not None and ":" not in self.env_factory:
-            raise ValueError(f"env_factory must be 'module:callable', got {self.env_factory!r}")
+            raise ConfigError(f"env_factory must be 'module:callable', got {self.env_factory!r}")
 
 
 def default_fidelity() -> str:
@@ -176,7 +177,7 @@ def agent_slug(agent: str) -> str:
     """A file-name-safe form of an agent spec (``my_pkg.mod:Agent`` → ``my_pkg.mod.Agent``)."""
     slug = re.sub(r"[^A-Za-z0-9._-]+", ".", agent).strip(".")
     if not slug:
-        raise ValueError(f"agent spec {agent!r} has no usable name")
+        raise UserError(f"agent spec {agent!r} has no usable name")
     return slug
 
 
@@ -206,13 +207,13 @@ def suite_tasks(
         indices = list(range(spec.episodes_per_task))
     elif isinstance(episodes, int):
         if episodes <= 0:
-            raise ValueError(f"episodes must be > 0, got {episodes}")
+            raise UserError(f"episodes must be > 0, got {episodes}")
         indices = list(range(min(episodes, spec.episodes_per_task)))
     else:
         indices = sorted(set(int(i) for i in episodes))
         bad = [i for i in indices if not 0 <= i < spec.episodes_per_task]
         if bad or not indices:
-            raise ValueError(f"episode indices must be in [0, {spec.episodes_per_task}), got {bad or 'none'}")
+            raise UserError(f"episode indices must be in [0, {spec.episodes_per_task}), got {bad or 'none'}")
     fidelity = fidelity or default_fidelity()
     from hbmp_bench.envs.config import WorldConfig
 
@@ -278,12 +279,12 @@ def with_agent_env(limits: RunnerLimits, agent: AgentDescription) -> RunnerLimit
     from hbmp_bench.agents.learned import OBSERVATION_OPTIONS
 
     if agent.env_factory is not None and agent.env_factory not in AGENT_ENV_FACTORIES:
-        raise ValueError(f"the agent asks for env_factory {agent.env_factory!r}; an agent may only ask for "
+        raise UserError(f"the agent asks for env_factory {agent.env_factory!r}; an agent may only ask for "
                          f"{list(AGENT_ENV_FACTORIES)} (the evaluator can set another with RunnerLimits.env_factory)")
     allowed = (*OBSERVATION_OPTIONS, PRIVILEGED_OPTION)
     unknown = sorted(k for k, _ in agent.env_kwargs if k not in allowed)
     if unknown:
-        raise ValueError(f"the agent asks for env options {unknown}; an agent may only set {list(allowed)}")
+        raise UserError(f"the agent asks for env options {unknown}; an agent may only set {list(allowed)}")
     from hbmp_bench.envs.config import WorldConfig
     from hbmp_bench.envs.observation import ObservationConfig
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from hbmp_bench.errors import ConfigError
+
 Point = tuple[float, float]
 
 #: Default town speed limit, m/s (50 km/h).
@@ -103,7 +105,7 @@ class TownSpec:
 
     def __post_init__(self):
         if self.green_s < 5:
-            raise ValueError(f"{self.name}: green_s must be >= 5 [s], got {self.green_s}")
+            raise ConfigError(f"{self.name}: green_s must be >= 5 [s], got {self.green_s}")
 
     def node(self, node_id: str) -> Node:
         """The node with id ``node_id`` (KeyError if none)."""

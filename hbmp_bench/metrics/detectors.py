@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hbmp_bench.metrics.geometry import LaneLocator, box_corners, boxes_overlap, crosses_line, footprint_points
+from hbmp_bench.vocabulary import DETECTED_KINDS
 
 WRONG_LANE_FRACTION = 0.3
 """Wrong lane: more than this fraction of the judged footprint on lanes running the other way (CoRL2017)."""
@@ -38,7 +39,8 @@ REARM_TIME_S = 1.0
 RED_STATES = frozenset("rRu")
 """Signal chars at which crossing the stop line is a red-light violation (``u``: red-yellow)."""
 
-EVENT_KINDS = ("collision_vehicle", "collision_pedestrian", "wrong_lane", "off_road", "red_light")
+EVENT_KINDS = DETECTED_KINDS
+"""The kinds a step's events count (:data:`~hbmp_bench.vocabulary.DETECTED_KINDS`)."""
 
 
 @dataclass

@@ -8,6 +8,8 @@ from collections.abc import Iterable
 from dataclasses import MISSING, asdict, dataclass, fields
 from pathlib import Path
 
+from hbmp_bench.errors import UserError
+
 PENALTIES = {
     "collision_pedestrian": 0.50,
     "collision_vehicle": 0.60,
@@ -149,7 +151,7 @@ def read_records(path: str | Path) -> list[EpisodeRecord]:
         try:
             return parse_records(fh)
         except ValueError as err:
-            raise ValueError(f"{path}: {err} (not an episode records file?)") from None
+            raise UserError(f"{path}: {err} (not an episode records file?)") from None
 
 
 def parse_records(lines: Iterable[str]) -> list[EpisodeRecord]:
@@ -164,6 +166,6 @@ def parse_records(lines: Iterable[str]) -> list[EpisodeRecord]:
         except json.JSONDecodeError:
             continue
         if not isinstance(row, dict) or not required <= row.keys():
-            raise ValueError(f"line {number} is not an episode record")
+            raise UserError(f"line {number} is not an episode record")
         out.append(EpisodeRecord(**{k: v for k, v in row.items() if k in names}))
     return out

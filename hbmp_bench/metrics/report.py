@@ -39,6 +39,7 @@ from pathlib import Path
 
 import pandas as pd
 
+from hbmp_bench.errors import UserError
 from hbmp_bench.metrics.records import (
     AGENT_ERROR,
     DECISION_CAP,
@@ -49,6 +50,7 @@ from hbmp_bench.metrics.records import (
     read_records,
 )
 from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS
+from hbmp_bench.vocabulary import COLLISION_KINDS, DETECTED_KINDS, VIOLATION_KINDS
 
 OUTCOMES = ("success", "wrong_lane", "collision", "red_light", "timeout", "left_network", "agent_error")
 """Columns of the failure-count view, in the paper's figure order, then the two ends the paper's figure
@@ -56,7 +58,7 @@ has no bar for: ``left_network`` (the ego left the road network, e.g. drove past
 and agent errors. Under episode rules that end at the first violation, each scored episode has
 exactly one of these outcomes."""
 
-INFRACTIONS = ("collision", "collision_vehicle", "collision_pedestrian", "wrong_lane", "off_road", "red_light")
+INFRACTIONS = ("collision", *DETECTED_KINDS)
 """Event kinds of the km-between-infractions view (``collision`` = all collisions)."""
 
 EXCLUDED = (SIM_ERROR, DECISION_CAP)
@@ -99,7 +101,7 @@ def records_files(paths: Iterable[str | os.PathLike]) -> list[Path]:
             files.extend(found)
         elif p.is_file():
             if p.suffix not in (".jsonl", ".json"):
-                raise ValueError(f"{p} is not a records file (.jsonl) or a leaderboard results file (.json)")
+                raise UserError(f"{p} is not a records file (.jsonl) or a leaderboard results file (.json)")
             files.append(p)
         else:
             raise FileNotFoundError(f"no records file or folder {p}")
@@ -126,7 +128,7 @@ def load_results(paths: Iterable[str | os.PathLike]) -> pd.DataFrame:
         df["source"] = str(path.parent if path.parent.name else path)
         frames.append(df)
     if not frames:
-        raise ValueError("the records files hold no records")
+        raise UserError("the records files hold no records")
     return label_result_sets(pd.concat(frames, ignore_index=True))
 
 
@@ -148,7 +150,7 @@ def records_frame(records: Iterable[EpisodeRecord], label: str | None = None) ->
     """A report frame from records in memory (``result_set`` = ``label`` or the agent)."""
     df = pd.DataFrame([r.to_dict() for r in latest_per_key(records)])
     if df.empty:
-        raise ValueError("no records")
+        raise UserError("no records")
     df["source"] = ""
     if label is not None:
         df["result_set"] = label
@@ -204,8 +206,7 @@ def failure_counts(df: pd.DataFrame) -> pd.DataFrame:
                 "result_set": result_set, "town": town, "episodes": len(part),
                 "success": int(part["success"].astype(bool).sum()),
                 "wrong_lane": int(((part["wrong_lane"] + part["off_road"]) > 0).sum()),
-                "collision": int(((part["collision_vehicle"] + part["collision_pedestrian"]
-                                   + part["collision_other"]) > 0).sum()),
+                "collision": int((part[list(COLLISION_KINDS)].sum(axis=1) > 0).sum()),
                 "red_light": int((part["red_light"] > 0).sum()),
                 "timeout": int(part["timeout"].astype(bool).sum()),
                 "left_network": int((part["end_reason"] == "left_network").sum()),
@@ -245,10 +246,10 @@ def km_between_infractions(df: pd.DataFrame) -> pd.DataFrame:
         part = scored(df[df["result_set"] == result_set])
         km = float(part["distance_m"].sum()) / 1000.0
         counts = {
-            "collision": int((part["collision_vehicle"] + part["collision_pedestrian"] + part["collision_other"]).sum()),
+            "collision": int(part[list(COLLISION_KINDS)].to_numpy().sum()),
             **{k: int(part[k].sum()) for k in INFRACTIONS if k != "collision"},
         }
-        counts["any"] = counts["collision"] + counts["wrong_lane"] + counts["off_road"] + counts["red_light"]
+        counts["any"] = counts["collision"] + sum(counts[k] for k in VIOLATION_KINDS)
         row = {"result_set": result_set, "km_driven": round(km, 3)}
         row.update({kind: (round(km / n, 3) if n else math.inf) for kind, n in counts.items()})
         rows.append(row)

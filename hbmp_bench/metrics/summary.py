@@ -8,6 +8,7 @@ import pandas as pd
 
 from hbmp_bench.metrics.records import DRIVING_SCORE_DEFINITION, EpisodeRecord
 from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS
+from hbmp_bench.vocabulary import COLLISION_KINDS
 
 
 def records_frame(records: Iterable[EpisodeRecord]) -> pd.DataFrame:
@@ -20,7 +21,7 @@ def summarize(records: Iterable[EpisodeRecord]) -> dict:
     df = records_frame(records)
     if df.empty:
         return {"episodes": 0, "success_rate": 0.0, "collisions": 0, "wrong_lane": 0, "red_light": 0, "off_road": 0, "timeouts": 0}
-    collisions = df["collision_vehicle"] + df["collision_pedestrian"] + df["collision_other"]
+    collisions = df[list(COLLISION_KINDS)].sum(axis=1)
     return {
         "episodes": int(len(df)),
         "success_rate": float(df["success"].mean()),

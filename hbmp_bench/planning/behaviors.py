@@ -50,21 +50,20 @@ import math
 from dataclasses import dataclass
 from enum import IntEnum
 
+from hbmp_bench.errors import ConfigError
+from hbmp_bench.vocabulary import BEHAVIORS
+
 __all__ = ["BEHAVIORS", "Behavior", "BehaviorConfig", "reference_speed"]
 
 
 class Behavior(IntEnum):
-    """High-level behavior ``b_k`` in the paper's order."""
+    """High-level behavior ``b_k`` in the paper's order (``BEHAVIORS[b]``, from the vocabulary, names ``b``)."""
 
     SPEED_UP = 0
     SPEED_DOWN = 1
     CHANGE_LEFT = 2
     CHANGE_RIGHT = 3
     KEEP = 4
-
-
-BEHAVIORS = tuple(b.name.lower() for b in Behavior)
-"""The behaviors' names in the paper's order (``BEHAVIORS[b]`` names behavior ``b``)."""
 
 
 @dataclass(frozen=True)
@@ -91,13 +90,13 @@ class BehaviorConfig:
 
     def __post_init__(self):
         if not 0.0 < self.speed_up_frac < 1.0:
-            raise ValueError(f"speed_up_frac must be in (0, 1), got {self.speed_up_frac!r}")
+            raise ConfigError(f"speed_up_frac must be in (0, 1), got {self.speed_up_frac!r}")
         if not 0.0 < self.speed_down_frac <= 1.0:
-            raise ValueError(f"speed_down_frac must be in (0, 1], got {self.speed_down_frac!r}")
+            raise ConfigError(f"speed_down_frac must be in (0, 1], got {self.speed_down_frac!r}")
         for name in ("speed_up_min_step", "speed_down_min_step", "min_lane_change_speed"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
-                raise ValueError(f"{name} must be finite and >= 0 [m/s], got {value!r}")
+                raise ConfigError(f"{name} must be finite and >= 0 [m/s], got {value!r}")
 
     def speed_step(self, behavior: Behavior | int, v_current: float) -> float:
         """Size [m/s] of the v_ref step of ``speed_up`` / ``speed_down`` at ``v_current`` [m/s]

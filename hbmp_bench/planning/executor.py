@@ -52,6 +52,8 @@ from .state import Obstacles, VehicleState
 from .tracking import TrackerConfig, TrajectoryTracker
 from .vehicle import Control, VehicleParams
 
+from hbmp_bench.errors import ConfigError
+
 __all__ = ["ExecutorConfig", "ReferencePaths", "BehaviorOutcome", "BehaviorExecutor",
            "reward_from_cost", "target_path"]
 
@@ -132,13 +134,13 @@ class ExecutorConfig:
                      "reward_scale"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"ExecutorConfig.{name} must be finite and > 0, got {v!r}")
+                raise ConfigError(f"ExecutorConfig.{name} must be finite and > 0, got {v!r}")
         if not (math.isfinite(self.min_duration)
                 and 0 <= self.min_duration <= min(self.max_duration, self.lane_keeping_max_duration)):
-            raise ValueError("ExecutorConfig.min_duration must be in [0, min(max_duration, lane_keeping_max_duration)]")
+            raise ConfigError("ExecutorConfig.min_duration must be in [0, min(max_duration, lane_keeping_max_duration)]")
         r = self.replan_every
         if not isinstance(r, (int, np.integer)) or isinstance(r, bool) or r < 1:
-            raise ValueError(f"ExecutorConfig.replan_every must be an int >= 1, got {r!r}")
+            raise ConfigError(f"ExecutorConfig.replan_every must be an int >= 1, got {r!r}")
 
 
 @dataclass(frozen=True)

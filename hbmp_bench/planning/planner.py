@@ -94,6 +94,8 @@ from .control import control_law, linear_speed_profile, omega_limit
 from .frame import Path
 from .state import Obstacles, VehicleState
 
+from hbmp_bench.errors import ConfigError
+
 __all__ = ["PlannerConfig", "PlanningProblem", "PlanResult", "plan", "plan_reference", "compile_kernels",
            "COST_NAMES"]
 
@@ -210,14 +212,14 @@ class PlannerConfig:
         for name in ("n_v", "n_omega"):
             v = getattr(self, name)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1:
-                raise ValueError(f"PlannerConfig.{name} must be an int >= 1, got {v!r}")
+                raise ConfigError(f"PlannerConfig.{name} must be an int >= 1, got {v!r}")
         n = round(self.horizon / self.dt)
         if n < 1 or abs(n * self.dt - self.horizon) > 1e-6 * max(1.0, self.horizon):
-            raise ValueError(
+            raise ConfigError(
                 f"PlannerConfig.horizon ({self.horizon}) must be a positive multiple of "
                 f"dt ({self.dt})")
         if self.infeasible_fallback not in INFEASIBLE_FALLBACKS:
-            raise ValueError(
+            raise ConfigError(
                 f"PlannerConfig.infeasible_fallback must be one of {', '.join(INFEASIBLE_FALLBACKS)}, "
                 f"got {self.infeasible_fallback!r}")
 
@@ -267,25 +269,25 @@ class PlanningProblem:
 
     def __post_init__(self):
         if not isinstance(self.ego, VehicleState):
-            raise ValueError(f"ego must be a VehicleState, got {type(self.ego).__name__}")
+            raise ConfigError(f"ego must be a VehicleState, got {type(self.ego).__name__}")
         if not isinstance(self.path, Path):
-            raise ValueError(f"path must be a Path, got {type(self.path).__name__}")
+            raise ConfigError(f"path must be a Path, got {type(self.path).__name__}")
         if self.obstacles is None:
             object.__setattr__(self, "obstacles", Obstacles.empty())
         elif not isinstance(self.obstacles, Obstacles):
             arr = np.asarray(self.obstacles, dtype=float)
             if arr.ndim != 2 or arr.shape[1] != 6:
-                raise ValueError("obstacles must be Obstacles or a (K, 6) array of "
+                raise ConfigError("obstacles must be Obstacles or a (K, 6) array of "
                                  f"x, y, yaw, v, length, width; got shape {arr.shape}")
             object.__setattr__(self, "obstacles", Obstacles.from_rows(arr))
         if not (np.isfinite(self.v_ref) and self.v_ref >= 0):
-            raise ValueError(f"v_ref must be finite and >= 0 [m/s], got {self.v_ref!r}")
+            raise ConfigError(f"v_ref must be finite and >= 0 [m/s], got {self.v_ref!r}")
         if not (np.isfinite(self.speed_limit) and self.speed_limit > 0):
-            raise ValueError(f"speed_limit must be finite and > 0 [m/s], got {self.speed_limit!r}")
+            raise ConfigError(f"speed_limit must be finite and > 0 [m/s], got {self.speed_limit!r}")
         if self.s_hint is not None and not np.isfinite(self.s_hint):
-            raise ValueError(f"s_hint must be finite or None, got {self.s_hint!r}")
+            raise ConfigError(f"s_hint must be finite or None, got {self.s_hint!r}")
         if len(self.corridor) != 3 or any(np.isnan(self.corridor)) or not self.corridor[0] < self.corridor[1]:
-            raise ValueError(f"corridor must be (e_right, e_left, s_end) [m] with e_right < e_left, got {self.corridor!r}")
+            raise ConfigError(f"corridor must be (e_right, e_left, s_end) [m] with e_right < e_left, got {self.corridor!r}")
 
 
 @dataclass(frozen=True, eq=False)

@@ -10,6 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hbmp_bench.errors import ConfigError
+
 __all__ = ["VehicleState", "Obstacles"]
 
 
@@ -34,9 +36,9 @@ class VehicleState:
     def __post_init__(self):
         vals = (self.x, self.y, self.yaw, self.v, self.steer)
         if not all(np.isfinite(vals)):
-            raise ValueError(f"VehicleState must be finite, got {vals}")
+            raise ConfigError(f"VehicleState must be finite, got {vals}")
         if self.v < 0:
-            raise ValueError(f"VehicleState.v must be >= 0 [m/s], got {self.v}")
+            raise ConfigError(f"VehicleState.v must be >= 0 [m/s], got {self.v}")
 
     @property
     def xy(self) -> np.ndarray:
@@ -78,14 +80,14 @@ class Obstacles:
         k = len(arrs["x"])
         for n, a in arrs.items():
             if a.shape != (k,):
-                raise ValueError(f"Obstacles.{n} has shape {a.shape}, expected ({k},)")
+                raise ConfigError(f"Obstacles.{n} has shape {a.shape}, expected ({k},)")
             object.__setattr__(self, n, a)
         table = np.stack(list(arrs.values()))  # one finiteness check for all six (hot path)
         if not np.isfinite(table).all():
             bad = next(n for n, a in arrs.items() if not np.isfinite(a).all())
-            raise ValueError(f"Obstacles.{bad} must be finite")
+            raise ConfigError(f"Obstacles.{bad} must be finite")
         if not (table[4:] > 0).all():
-            raise ValueError("Obstacles.length and width must be > 0 [m]")
+            raise ConfigError("Obstacles.length and width must be > 0 [m]")
         object.__setattr__(self, "_k", k)
 
     def __len__(self) -> int:

@@ -26,6 +26,8 @@ import numpy as np
 from .state import VehicleState
 from .vehicle import Control, VehicleParams
 
+from hbmp_bench.errors import ConfigError
+
 __all__ = ["PID", "TrackerConfig", "TrajectoryTracker"]
 
 
@@ -83,15 +85,15 @@ class TrackerConfig:
         for name in ("kp_speed", "ki_speed", "kd_speed", "speed_preview"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v >= 0):
-                raise ValueError(f"TrackerConfig.{name} must be finite and >= 0, got {v!r}")
+                raise ConfigError(f"TrackerConfig.{name} must be finite and >= 0, got {v!r}")
         for name in ("integral_limit", "lookahead_time", "min_lookahead", "max_lookahead"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"TrackerConfig.{name} must be finite and > 0, got {v!r}")
+                raise ConfigError(f"TrackerConfig.{name} must be finite and > 0, got {v!r}")
         if self.max_lookahead < self.min_lookahead:
-            raise ValueError("TrackerConfig.max_lookahead must be >= min_lookahead")
+            raise ConfigError("TrackerConfig.max_lookahead must be >= min_lookahead")
         if not 0.0 <= self.hold_brake <= 1.0:
-            raise ValueError(f"TrackerConfig.hold_brake must be in [0, 1], got {self.hold_brake!r}")
+            raise ConfigError(f"TrackerConfig.hold_brake must be in [0, 1], got {self.hold_brake!r}")
 
 
 def lookahead_point_reference(xy: np.ndarray, p: np.ndarray, dist: float) -> np.ndarray:

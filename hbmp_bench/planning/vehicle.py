@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 from .state import VehicleState
 
+from hbmp_bench.errors import ConfigError
+
 __all__ = ["VehicleParams", "Control", "step"]
 
 
@@ -54,12 +56,12 @@ class VehicleParams:
                      "max_speed", "max_substep"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
-                raise ValueError(f"VehicleParams.{name} must be finite and > 0, got {v!r}")
+                raise ConfigError(f"VehicleParams.{name} must be finite and > 0, got {v!r}")
         if not 0 <= self.rear_to_cg <= self.wheelbase:
-            raise ValueError(
+            raise ConfigError(
                 f"VehicleParams.rear_to_cg must be in [0, wheelbase], got {self.rear_to_cg!r}")
         if self.max_steer >= math.pi / 2:
-            raise ValueError(
+            raise ConfigError(
                 f"VehicleParams.max_steer must be < pi/2 [rad], got {self.max_steer!r}")
 
     @property
@@ -84,11 +86,11 @@ class Control:
 
     def __post_init__(self):
         if not -1.0 <= self.steer <= 1.0:
-            raise ValueError(f"Control.steer must be in [-1, 1], got {self.steer!r}")
+            raise ConfigError(f"Control.steer must be in [-1, 1], got {self.steer!r}")
         if not 0.0 <= self.throttle <= 1.0:
-            raise ValueError(f"Control.throttle must be in [0, 1], got {self.throttle!r}")
+            raise ConfigError(f"Control.throttle must be in [0, 1], got {self.throttle!r}")
         if not 0.0 <= self.brake <= 1.0:
-            raise ValueError(f"Control.brake must be in [0, 1], got {self.brake!r}")
+            raise ConfigError(f"Control.brake must be in [0, 1], got {self.brake!r}")
 
 
 def step(state: VehicleState, control: Control, dt: float,

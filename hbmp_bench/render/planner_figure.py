@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hbmp_bench.errors import UserError
 from hbmp_bench.maps.roadnet import RoadNetwork, point_along
 from hbmp_bench.planning import (Behavior, BehaviorConfig, Obstacles, Path as LanePath, PlannerConfig,
                                  PlanningProblem, PlanResult, ReferencePaths, VehicleState, plan,
@@ -108,7 +109,7 @@ def pick_multilane_edge(net: RoadNetwork, min_length_m: float = 50.0) -> str:
         and all(_straightness(net.lanes[i].shape) < 0.3 for i in lanes)
     ]
     if not candidates:
-        raise ValueError(f"{net.path.name} has no straight edge of >= {min_length_m} m with two or more "
+        raise UserError(f"{net.path.name} has no straight edge of >= {min_length_m} m with two or more "
                          "same-direction lanes; use Town03, Town04 or Town05, or the synthetic road")
     return sorted(candidates, key=lambda c: (-c[0], -c[1], c[2]))[0][2]
 
@@ -320,7 +321,7 @@ def planner_figure(path: str | os.PathLike, town: str = "Town05", synthetic: boo
 
     path = Path(path)
     if path.suffix.lower() not in FIGURE_SUFFIXES:
-        raise ValueError(f"figure path must end in one of {', '.join(FIGURE_SUFFIXES)}, got {str(path)!r}")
+        raise UserError(f"figure path must end in one of {', '.join(FIGURE_SUFFIXES)}, got {str(path)!r}")
     if synthetic:
         situation = synthetic_situation()
     else:

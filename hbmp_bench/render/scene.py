@@ -11,6 +11,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from hbmp_bench.errors import ConfigError
+
 SIGNAL_STATES = "rRyYuUgGsoO"
 """SUMO signal characters a stop bar can show: r/R red, y/Y amber, u/U red+amber, g/G green
 (minor/major), s green right-turn arrow, o/O off (blinking / no signal)."""
@@ -82,10 +84,10 @@ class SceneView:
         for name in ("ego_yaw", "ego_length", "ego_width", "ego_speed", "time_s"):
             value = float(getattr(self, name))
             if not np.isfinite(value):
-                raise ValueError(f"SceneView.{name} must be finite, got {value!r}")
+                raise ConfigError(f"SceneView.{name} must be finite, got {value!r}")
             put(self, name, value)
         if self.ego_length <= 0 or self.ego_width <= 0:
-            raise ValueError("SceneView.ego_length and ego_width must be > 0 [m]")
+            raise ConfigError("SceneView.ego_length and ego_width must be > 0 [m]")
         put(self, "actors_xy", _array("actors_xy", self.actors_xy, (None, 2)))
         k = len(self.actors_xy)
         for name in ("actors_yaw", "actors_length", "actors_width"):
@@ -94,18 +96,18 @@ class SceneView:
         lights = dict(self.light_states)
         for lane, state in lights.items():
             if not isinstance(state, str) or len(state) != 1 or state not in SIGNAL_STATES:
-                raise ValueError(f"SceneView.light_states[{lane!r}] must be one of {SIGNAL_STATES!r}, got {state!r}")
+                raise ConfigError(f"SceneView.light_states[{lane!r}] must be one of {SIGNAL_STATES!r}, got {state!r}")
         put(self, "light_states", lights)
         put(self, "route_edges", tuple(self.route_edges))
         if self.goal_xy is not None:
             put(self, "goal_xy", _array("goal_xy", self.goal_xy, (2,)))
         if self.plan_trajectories is None:
             if self.plan_feasible is not None or self.plan_chosen is not None:
-                raise ValueError("SceneView.plan_feasible / plan_chosen need plan_trajectories")
+                raise ConfigError("SceneView.plan_feasible / plan_chosen need plan_trajectories")
         else:
             plans = np.asarray(self.plan_trajectories, dtype=float)
             if plans.ndim != 3 or plans.shape[2] < 2 or plans.shape[1] < 1:
-                raise ValueError(f"SceneView.plan_trajectories must have shape (S, T, 2), got {plans.shape}")
+                raise ConfigError(f"SceneView.plan_trajectories must have shape (S, T, 2), got {plans.shape}")
             plans = _array("plan_trajectories", plans[:, :, :2], (None, plans.shape[1], 2))
             put(self, "plan_trajectories", plans)
             s = len(plans)
@@ -114,7 +116,7 @@ class SceneView:
             if self.plan_chosen is not None:
                 chosen = int(self.plan_chosen)
                 if not 0 <= chosen < s:
-                    raise ValueError(f"SceneView.plan_chosen must be in [0, {s}), got {self.plan_chosen!r}")
+                    raise ConfigError(f"SceneView.plan_chosen must be in [0, {s}), got {self.plan_chosen!r}")
                 put(self, "plan_chosen", chosen)
         put(self, "caption", str(self.caption))
 

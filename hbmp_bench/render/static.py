@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import Image, ImageDraw
 
+from hbmp_bench.errors import ConfigError
 from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.render import palette
 from hbmp_bench.render.geometry import dashes, offset_polyline
@@ -163,9 +164,9 @@ def _draw_markings(canvas: _Canvas, net: RoadNetwork) -> None:
 def rasterise(net: RoadNetwork, metres_per_px: float, supersample: int = 2) -> StaticLayer:
     """Draw ``net`` at ``metres_per_px`` [m/px] (see the module docstring)."""
     if not (math.isfinite(metres_per_px) and metres_per_px > 0):
-        raise ValueError(f"metres_per_px must be finite and > 0, got {metres_per_px!r}")
+        raise ConfigError(f"metres_per_px must be finite and > 0, got {metres_per_px!r}")
     if int(supersample) != supersample or supersample < 1:
-        raise ValueError(f"supersample must be an int >= 1, got {supersample!r}")
+        raise ConfigError(f"supersample must be an int >= 1, got {supersample!r}")
     xmin, ymin, xmax, ymax = network_bounds(net)
     xmin, ymin = xmin - STATIC_MARGIN_M, ymin - STATIC_MARGIN_M
     xmax, ymax = xmax + STATIC_MARGIN_M, ymax + STATIC_MARGIN_M

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hbmp_bench.errors import UserError
 from hbmp_bench.planning import BehaviorConfig
 from hbmp_bench.render.planner_figure import FIGURE_SUFFIXES
 
@@ -41,7 +42,7 @@ def stopping_figure(path: str | os.PathLike, town: str = "Town01", dpi: int = 15
 
     path = Path(path)
     if path.suffix.lower() not in FIGURE_SUFFIXES:
-        raise ValueError(f"figure path must end in one of {', '.join(FIGURE_SUFFIXES)}, got {str(path)!r}")
+        raise UserError(f"figure path must end in one of {', '.join(FIGURE_SUFFIXES)}, got {str(path)!r}")
     current = BehaviorConfig()
     step = f"{current.speed_down_frac * 100:g} % / {current.speed_down_min_step:g} m/s"
     runs = (

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from hbmp_bench.errors import ConfigError
 from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.render import palette
 from hbmp_bench.render.geometry import box_corners
@@ -65,13 +66,13 @@ class RenderConfig:
         for name in ("width", "height", "supersample"):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
-                raise ValueError(f"RenderConfig.{name} must be an int >= 1, got {value!r}")
+                raise ConfigError(f"RenderConfig.{name} must be an int >= 1, got {value!r}")
         if self.width < 16 or self.height < 16:
-            raise ValueError(f"RenderConfig frame must be at least 16x16 px, got {self.width}x{self.height}")
+            raise ConfigError(f"RenderConfig frame must be at least 16x16 px, got {self.width}x{self.height}")
         if not (math.isfinite(self.metres_per_px) and self.metres_per_px > 0):
-            raise ValueError(f"RenderConfig.metres_per_px must be finite and > 0, got {self.metres_per_px!r}")
+            raise ConfigError(f"RenderConfig.metres_per_px must be finite and > 0, got {self.metres_per_px!r}")
         if self.view not in VIEWS:
-            raise ValueError(f"RenderConfig.view must be one of {VIEWS}, got {self.view!r}")
+            raise ConfigError(f"RenderConfig.view must be one of {VIEWS}, got {self.view!r}")
 
 
 @dataclass(frozen=True)

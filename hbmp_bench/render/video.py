@@ -14,6 +14,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from hbmp_bench.errors import UserError
+
 VIDEO_SUFFIXES = (".gif", ".mp4")
 
 
@@ -22,7 +24,7 @@ def _mp4_writer():
     try:
         import imageio_ffmpeg
     except ImportError as exc:
-        raise ValueError("writing .mp4 needs the optional package imageio-ffmpeg "
+        raise UserError("writing .mp4 needs the optional package imageio-ffmpeg "
                          "(pip install imageio-ffmpeg); write a .gif instead") from exc
     return imageio_ffmpeg
 
@@ -32,11 +34,11 @@ def check_video_path(path: str | os.PathLike) -> Path:
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in VIDEO_SUFFIXES:
-        raise ValueError(f"video path must end in one of {', '.join(VIDEO_SUFFIXES)}, got {str(path)!r}")
+        raise UserError(f"video path must end in one of {', '.join(VIDEO_SUFFIXES)}, got {str(path)!r}")
     if suffix == ".mp4":
         _mp4_writer()
     if path.is_dir():
-        raise ValueError(f"video path {str(path)!r} is a directory")
+        raise UserError(f"video path {str(path)!r} is a directory")
     return path
 
 
@@ -81,9 +83,9 @@ def write_gif(frames: Iterable, path: str | os.PathLike, fps: float = 10.0) -> P
     """
     path = Path(path)
     if path.suffix.lower() != ".gif":
-        raise ValueError(f"GIF path must end in .gif, got {str(path)!r}")
+        raise UserError(f"GIF path must end in .gif, got {str(path)!r}")
     if not (np.isfinite(fps) and fps > 0):
-        raise ValueError(f"fps must be finite and > 0, got {fps!r}")
+        raise UserError(f"fps must be finite and > 0, got {fps!r}")
     images: list[Image.Image] = []
     shape = None
     for frame in frames:
@@ -106,7 +108,7 @@ def write_mp4(frames: Iterable, path: str | os.PathLike, fps: float = 10.0) -> P
     """Write frames as an H.264 MP4 (needs ``imageio-ffmpeg``; frame sides must be even)."""
     path = Path(path)
     if path.suffix.lower() != ".mp4":
-        raise ValueError(f"MP4 path must end in .mp4, got {str(path)!r}")
+        raise UserError(f"MP4 path must end in .mp4, got {str(path)!r}")
     ffmpeg = _mp4_writer()
     arrays = [np.asarray(_as_image(f, None).convert("RGB")) for f in frames]
     if not arrays:

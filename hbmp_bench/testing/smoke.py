@@ -10,6 +10,7 @@ from __future__ import annotations
 import textwrap
 from dataclasses import dataclass, field
 
+from hbmp_bench.errors import ConfigError
 from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, default_fidelity
 from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR
@@ -45,9 +46,9 @@ class SmokeConfig:
         for task in self.tasks:
             check_task(task)
         if not 0 <= self.episode < get_suite(self.suite).episodes_per_task:
-            raise ValueError(f"episode must be in [0, {get_suite(self.suite).episodes_per_task}), got {self.episode}")
+            raise ConfigError(f"episode must be in [0, {get_suite(self.suite).episodes_per_task}), got {self.episode}")
         if self.max_decisions <= 0 or self.max_decision_s <= 0:
-            raise ValueError("max_decisions and max_decision_s must be > 0")
+            raise ConfigError("max_decisions and max_decision_s must be > 0")
 
 
 @dataclass(frozen=True)

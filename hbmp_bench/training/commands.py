@@ -20,7 +20,7 @@ import os
 import shlex
 import time
 
-from hbmp_bench.errors import Interrupted
+from hbmp_bench.errors import Interrupted, UserError
 from hbmp_bench.locks import Busy, exclusive_lock
 from hbmp_bench.training.checkpoints import KINDS
 
@@ -63,14 +63,14 @@ def resolve_init(kind: str, init: str | None) -> str | None:
     """The checkpoint that initialises a PPO actor: a path, a shipped name, or None (random)."""
     if kind == "il":
         if init not in (None, "none"):
-            raise ValueError("--init does not apply to il (DAgger starts from a random network)")
+            raise UserError("--init does not apply to il (DAgger starts from a random network)")
         return None
     if init is None:
         init = "il" if kind in ("hbmp", "hbmp-s") else "none"
     if init == "none":
         return None
     if kind == "flat":
-        raise ValueError("the flat baseline has no behavior layer to initialise from; use --init none")
+        raise UserError("the flat baseline has no behavior layer to initialise from; use --init none")
     if init.endswith(".pt"):
         if not os.path.isfile(init):
             raise FileNotFoundError(f"no checkpoint file {init!r}")
@@ -110,11 +110,11 @@ def _cmd_train(args: argparse.Namespace) -> int:
     if args.out is None:
         args.out = os.path.join("runs", f"{kind}__{args.scenario.split('/')[-1]}__{args.seed}__{int(time.time())}")
     if args.validate_every and kind == "il":
-        raise ValueError("--validate-every applies to hbmp, hbmp-s and flat (DAgger's rounds.csv has its holdout)")
+        raise UserError("--validate-every applies to hbmp, hbmp-s and flat (DAgger's rounds.csv has its holdout)")
     if args.ppo and kind == "il":
-        raise ValueError("--ppo options apply to hbmp, hbmp-s and flat (il is trained by DAgger)")
+        raise UserError("--ppo options apply to hbmp, hbmp-s and flat (il is trained by DAgger)")
     if args.ppo and args.resume:
-        raise ValueError("a resumed run keeps the PPO options its checkpoint recorded; start a new --out to change "
+        raise UserError("a resumed run keeps the PPO options its checkpoint recorded; start a new --out to change "
                          "them")
     init = resolve_init(kind, args.init) if args.resume is None else None
     ppo = _ppo_config(args, init) if kind != "il" and args.resume is None else None  # a resume keeps its own
@@ -130,7 +130,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
     entry_point = None
     if kind == "flat":
         if importlib.util.find_spec(CONTROL_ENV.split(":")[0]) is None:
-            raise ValueError("train flat needs the continuous-control env hbmp_bench.envs.control_env.ControlEnv, "
+            raise UserError("train flat needs the continuous-control env hbmp_bench.envs.control_env.ControlEnv, "
                              "which this installation does not have yet")
         entry_point = CONTROL_ENV
     env_config = WorkerEnvConfig(env_id=args.scenario, env_kwargs=env_kwargs, entry_point=entry_point,
@@ -164,12 +164,12 @@ def _ppo_config(args: argparse.Namespace, init: str | None):
              "mask_actions": ("--mask-actions", args.mask_actions or None)}
     for name, (flag, value) in flags.items():
         if value is not None and name in assigned and assigned[name] != value:
-            raise ValueError(f"{flag} and --ppo {name}= disagree ({value} against {assigned[name]}): give one")
+            raise UserError(f"{flag} and --ppo {name}= disagree ({value} against {assigned[name]}): give one")
     options = {"critic_warmup_episodes": CRITIC_WARMUP_EPISODES if init is not None else 0,
                **{name: value for name, (_, value) in flags.items() if value is not None}, **assigned}
     ppo = PPOConfig(**options)
     if ppo.anchor_coef > 0 and init is None:
-        raise ValueError("--ppo anchor_coef needs an --init actor to anchor to")
+        raise UserError("--ppo anchor_coef needs an --init actor to anchor to")
     return ppo
 
 

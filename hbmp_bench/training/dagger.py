@@ -43,7 +43,7 @@ import torch
 import torch.nn.functional as F
 from tensordict import TensorDict
 
-from hbmp_bench.errors import UserError
+from hbmp_bench.errors import ConfigError, UserError
 from hbmp_bench.training.checkpoints import load_checkpoint, policy_only, save_checkpoint
 from hbmp_bench.training.models import behavior_model_cfgs, build_model, observation_shapes
 from hbmp_bench.training.ppo import MASK_GROUP, input_groups, model_info
@@ -80,9 +80,9 @@ class DaggerConfig:
 
     def __post_init__(self):
         if not 0 <= self.beta_start <= 1 or not 0 <= self.hold_fraction <= 1 or not 0 <= self.holdout_fraction < 1:
-            raise ValueError("beta_start and hold_fraction must be in [0, 1], holdout_fraction in [0, 1)")
+            raise ConfigError("beta_start and hold_fraction must be in [0, 1], holdout_fraction in [0, 1)")
         if min(self.batch_size, self.decisions_per_round, self.updates_per_round) < 1 or self.learning_rate <= 0:
-            raise ValueError("batch_size, decisions_per_round, updates_per_round and learning_rate must be > 0")
+            raise ConfigError("batch_size, decisions_per_round, updates_per_round and learning_rate must be > 0")
 
 
 def expert_probability(episode: int, budget: int, beta_start: float = 0.95, hold_fraction: float = 0.3) -> float:
@@ -91,7 +91,7 @@ def expert_probability(episode: int, budget: int, beta_start: float = 0.95, hold
     ``beta_start`` for episodes < hold_fraction·budget, then linear to 0 at ``budget``.
     """
     if budget < 1:
-        raise ValueError(f"budget must be >= 1, got {budget}")
+        raise ConfigError(f"budget must be >= 1, got {budget}")
     hold = hold_fraction * budget
     if episode < hold:
         return float(beta_start)
@@ -207,12 +207,12 @@ def train_dagger(run: RunConfig, env_config: WorkerEnvConfig, dagger: DaggerConf
         The run's progress dict and the path of the final policy (``policy``).
     """
     if run.kind != "il":
-        raise ValueError(f"DAgger trains the 'il' policy, not {run.kind!r}")
+        raise ConfigError(f"DAgger trains the 'il' policy, not {run.kind!r}")
     env_config = dataclasses.replace(env_config, expert_labels=True)
     resume = load_checkpoint(run.resume, kinds=("il",)) if run.resume else None
     progress = Progress.from_dict(resume["progress"]) if resume else Progress()
     if progress.episodes >= run.episodes:
-        raise ValueError(f"the checkpoint already has {progress.episodes} episodes; ask for more than that")
+        raise ConfigError(f"the checkpoint already has {progress.episodes} episodes; ask for more than that")
     data_path = os.path.join(os.path.dirname(os.path.abspath(run.resume)), "dataset.npz") if resume else ""
     if resume and not os.path.isfile(data_path):
         raise UserError(f"DAgger goes on from its aggregated demonstrations, but {data_path} is missing beside the "

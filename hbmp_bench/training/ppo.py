@@ -80,6 +80,7 @@ from torch import nn
 from rsl_rl.utils import resolve_optimizer
 from rsl_rl.utils.logger import Logger
 
+from hbmp_bench.errors import ConfigError, UserError
 from hbmp_bench.training.checkpoints import load_checkpoint, policy_only, save_checkpoint
 from hbmp_bench.training.models import behavior_model_cfgs, control_model_cfgs, observation_shapes
 from hbmp_bench.training.run import Progress, RunConfig, episode_row, final_results, progress_bar
@@ -257,22 +258,22 @@ class PPOConfig:
 
     def __post_init__(self):
         if self.anchor_kl not in ANCHOR_KL:
-            raise ValueError(f"anchor_kl must be one of {', '.join(ANCHOR_KL)}, got {self.anchor_kl!r}")
+            raise ConfigError(f"anchor_kl must be one of {', '.join(ANCHOR_KL)}, got {self.anchor_kl!r}")
         for name in ("actor_learning_rate", "critic_learning_rate", "clip_param", "reward_scale", "init_std",
                      "temperature"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+                raise ConfigError(f"{name} must be > 0, got {getattr(self, name)}")
         for name in ("entropy_coef", "anchor_coef"):
             if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+                raise ConfigError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.desired_kl is not None and not self.desired_kl > 0:
-            raise ValueError(f"desired_kl must be > 0 or None, got {self.desired_kl}")
+            raise ConfigError(f"desired_kl must be > 0 or None, got {self.desired_kl}")
         if not 0 < self.gamma <= 1 or not 0 <= self.lam <= 1:
-            raise ValueError("gamma must be in (0, 1] and lam in [0, 1]")
+            raise ConfigError("gamma must be in (0, 1] and lam in [0, 1]")
         if self.mini_batch_size < 1 or self.num_steps_per_env < 1 or self.num_learning_epochs < 1:
-            raise ValueError("mini_batch_size, num_steps_per_env and num_learning_epochs must be >= 1")
+            raise ConfigError("mini_batch_size, num_steps_per_env and num_learning_epochs must be >= 1")
         if self.critic_warmup_episodes < 0:
-            raise ValueError(f"critic_warmup_episodes must be >= 0, got {self.critic_warmup_episodes}")
+            raise ConfigError(f"critic_warmup_episodes must be >= 0, got {self.critic_warmup_episodes}")
 
     @classmethod
     def parse_assignments(cls, assignments: list[str]) -> dict[str, Any]:
@@ -285,7 +286,7 @@ class PPOConfig:
         for text in assignments:
             name, sep, value = text.partition("=")
             if not sep or name not in fields:
-                raise ValueError(f"--ppo takes NAME=VALUE with NAME one of {', '.join(fields)}; got {text!r}")
+                raise UserError(f"--ppo takes NAME=VALUE with NAME one of {', '.join(fields)}; got {text!r}")
             default = fields[name].default
             if value.lower() == "none" and default is None:
                 parsed[name] = None
@@ -293,14 +294,14 @@ class PPOConfig:
                 parsed[name] = value
             elif isinstance(default, bool):
                 if value.lower() not in ("true", "false", "1", "0"):
-                    raise ValueError(f"--ppo {name} takes true or false, got {value!r}")
+                    raise UserError(f"--ppo {name} takes true or false, got {value!r}")
                 parsed[name] = value.lower() in ("true", "1")
             else:
                 kind = int if isinstance(default, int) else float
                 try:
                     parsed[name] = kind(value)
                 except ValueError:
-                    raise ValueError(f"--ppo {name} takes a number ({kind.__name__}), got {value!r}") from None
+                    raise UserError(f"--ppo {name} takes a number ({kind.__name__}), got {value!r}") from None
         return parsed
 
     @classmethod
@@ -313,7 +314,7 @@ class PPOConfig:
         """The ``train_cfg`` dict of rsl-rl's ``OnPolicyRunner`` (a fresh dict: the runner mutates it)."""
         batch = num_envs * self.num_steps_per_env
         if batch % self.mini_batch_size:
-            raise ValueError(f"workers × num_steps_per_env = {batch} is not a multiple of the mini-batch "
+            raise ConfigError(f"workers × num_steps_per_env = {batch} is not a multiple of the mini-batch "
                              f"size {self.mini_batch_size}")
         return {
             "num_steps_per_env": self.num_steps_per_env,
@@ -384,10 +385,10 @@ def check_init_compatible(init: dict, info: dict) -> None:
     theirs = init["model"]
     for key in ("obs_groups", "num_actions", "action_space"):
         if theirs[key] != info[key]:
-            raise ValueError(f"--init checkpoint differs in {key}: {theirs[key]} vs this run's {info[key]}")
+            raise ConfigError(f"--init checkpoint differs in {key}: {theirs[key]} vs this run's {info[key]}")
     for group in info["obs_groups"]["actor"]:
         if theirs["obs_shapes"].get(group) != info["obs_shapes"][group]:
-            raise ValueError(f"--init checkpoint has {group} of shape {theirs['obs_shapes'].get(group)}, "
+            raise ConfigError(f"--init checkpoint has {group} of shape {theirs['obs_shapes'].get(group)}, "
                              f"this run {info['obs_shapes'][group]}")
     ours_obs, their_obs = info["env"].get("observation", "deformed"), theirs["env"].get("observation", "deformed")
     if ours_obs != their_obs:
@@ -411,7 +412,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
         The run's progress dict and the path of the final policy (``policy``).
     """
     if run.kind == "il":
-        raise ValueError("train il with hbmp_bench.training.dagger.train_dagger")
+        raise ConfigError("train il with hbmp_bench.training.dagger.train_dagger")
     resume = load_checkpoint(run.resume, kinds=(run.kind,)) if run.resume else None
     if resume is not None:
         recorded = PPOConfig.from_options(resume["train"])
@@ -424,7 +425,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
     init_ckpt = load_checkpoint(init, kinds=("il", "hbmp", "hbmp-s")) if init and resume is None else None
     progress = Progress.from_dict(resume["progress"]) if resume else Progress()
     if progress.episodes >= run.episodes:
-        raise ValueError(f"the checkpoint already has {progress.episodes} episodes; ask for more than that")
+        raise ConfigError(f"the checkpoint already has {progress.episodes} episodes; ask for more than that")
     os.makedirs(run.out, exist_ok=True)
     torch.manual_seed(run.seed + progress.episodes)
     torch.set_num_threads(run.threads())
@@ -439,9 +440,9 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
         groups = input_groups(env.get_observations())
         discrete = isinstance(env.action_space, spaces.Discrete)
         if ppo.mask_actions and not discrete:
-            raise ValueError("mask_actions needs a behavior env with an action mask")
+            raise ConfigError("mask_actions needs a behavior env with an action mask")
         if ppo.temperature != 1.0 and not discrete:
-            raise ValueError("temperature is the behavior policy's (a categorical); "
+            raise ConfigError("temperature is the behavior policy's (a categorical); "
                              "the flat baseline's controls are Gaussian")
         actor_cfg, critic_cfg = (behavior_model_cfgs(ppo.mask_actions, temperature=ppo.temperature) if discrete
                                  else control_model_cfgs(ppo.init_std))
@@ -459,7 +460,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
             alg.get_policy().load_state_dict(init_ckpt["actor_state_dict"])
             alg.set_anchor(init_ckpt["actor_state_dict"])
         if ppo.anchor_coef > 0 and alg.anchor is None:
-            raise ValueError("anchor_coef > 0 needs an --init actor to anchor to")
+            raise ConfigError("anchor_coef > 0 needs an --init actor to anchor to")
         options = {"kind": run.kind, "workers": run.workers, "backend": run.backend,
                    "init": (init_label or init) if resume is None else None,
                    **{f"env.{k}": v for k, v in info["env"].items()}, "reward": env_config.reward,

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from hbmp_bench.errors import ConfigError, UnknownNameError
 from hbmp_bench.training.checkpoints import KINDS
 
 BACKENDS = ("process", "ray")
@@ -67,25 +68,21 @@ class RunConfig:
 
     def __post_init__(self):
         if self.kind not in KINDS:
-            from hbmp_bench.errors import UnknownNameError
-
             raise UnknownNameError("training kind", self.kind, KINDS)
         if self.episodes < 1:
-            raise ValueError(f"episodes must be >= 1, got {self.episodes}")
+            raise ConfigError(f"episodes must be >= 1, got {self.episodes}")
         if self.workers < 1:
-            raise ValueError(f"workers must be >= 1, got {self.workers}")
+            raise ConfigError(f"workers must be >= 1, got {self.workers}")
         if self.backend not in BACKENDS:
-            from hbmp_bench.errors import UnknownNameError
-
             raise UnknownNameError("training backend", self.backend, BACKENDS)
         if self.address is not None and self.backend != "ray":
-            raise ValueError("address is for the ray backend only (--backend ray)")
+            raise ConfigError("address is for the ray backend only (--backend ray)")
         if self.save_every < 1:
-            raise ValueError(f"save_every must be >= 1, got {self.save_every}")
+            raise ConfigError(f"save_every must be >= 1, got {self.save_every}")
         if self.validate_every < 0:
-            raise ValueError(f"validate_every must be >= 0 (0: never), got {self.validate_every}")
+            raise ConfigError(f"validate_every must be >= 0 (0: never), got {self.validate_every}")
         if self.validate_episodes is not None and self.validate_episodes < 1:
-            raise ValueError(f"validate_episodes must be >= 1, got {self.validate_episodes}")
+            raise ConfigError(f"validate_episodes must be >= 1, got {self.validate_episodes}")
 
     def path(self, name: str) -> str:
         return os.path.join(self.out, name)

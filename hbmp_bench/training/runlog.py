@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from hbmp_bench.errors import UserError
+
 EPISODE_COLUMNS = ("episode", "worker", "r_T", "r_T_plus_r_t", "train_return", "success", "infractions", "length",
                    "end_reason", "route_completion", "sim_time_s", "wall_s")
 DAGGER_COLUMNS = ("beta", "expert_share")
@@ -45,7 +47,7 @@ class CsvLog:
                 header = next(csv.reader(f), [])
             older = len(header) < len(self.columns) and tuple(header) == self.columns[:len(header)]
             if tuple(header) != self.columns and not older:
-                raise ValueError(f"{path!r} has columns {header}, expected {list(self.columns)}")
+                raise UserError(f"{path!r} has columns {header}, expected {list(self.columns)}")
             if keep_through is not None or older:  # an older log gains the new columns, empty in its rows
                 with open(path, newline="") as f:
                     rows = [r for r in csv.DictReader(f) if keep_through is None or int(r[key]) <= keep_through]
@@ -173,7 +175,7 @@ def plot_comparison(folders: Sequence[str], labels: Sequence[str], out: str, win
     import matplotlib.pyplot as plt
 
     if len(folders) != len(labels):
-        raise ValueError("give one label per run folder")
+        raise UserError("give one label per run folder")
     fig, axes = plt.subplots(1, len(COMPARISON_PANELS), figsize=(5 * len(COMPARISON_PANELS), 3.8), sharey=False)
     for k, (folder, label) in enumerate(zip(folders, labels)):
         eps = read_csv(os.path.join(folder, "episodes.csv"))

@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from hbmp_bench.vocabulary import COLLISION_KINDS
+
 VALIDATION_SUITE = "hbmp-val"
 VALIDATION_COLUMNS = ("episode", "success", "success_navigation", "success_navigation_dynamic", "route_completion",
                       "red_light", "collision", "wrong_lane", "timeout", "episodes", "wall_s")
@@ -64,7 +66,7 @@ def validate(policy: str, workers: int, fidelity: str | None = None, episodes: i
         "success_navigation_dynamic": rate([r for r in records if r.task == "NavigationDynamic"]),
         "route_completion": round(float(np.mean([r.route_completion for r in records])), 4),
         "red_light": sum(r.red_light > 0 for r in records),
-        "collision": sum(r.collision_vehicle + r.collision_pedestrian + r.collision_other > 0 for r in records),
+        "collision": sum(sum(getattr(r, k) for k in COLLISION_KINDS) > 0 for r in records),
         "wrong_lane": sum(r.wrong_lane > 0 for r in records),
         "timeout": sum(bool(r.timeout) for r in records),
         "episodes": len(records),

@@ -31,6 +31,7 @@ from gymnasium import spaces
 from rsl_rl.env import VecEnv
 from tensordict import TensorDict
 
+from hbmp_bench.errors import ConfigError
 from hbmp_bench.training.run import BACKENDS
 from hbmp_bench.training.worker import EnvActor, StepReply, WorkerEnvConfig, make_env, run_worker
 
@@ -139,7 +140,7 @@ class WorkerVecEnv(VecEnv):
 
         Returns:
             obs: TensorDict (num_envs,) of the next observations.
-            rewards: (num_envs,) float32 training rewards (see :data:`~hbmp_bench.training.worker.REWARD_MODES`).
+            rewards: (num_envs,) float32 training rewards (see :data:`~hbmp_bench.vocabulary.TRAINING_REWARD_MODES`).
             dones: (num_envs,) long, 1 where the episode ended (the obs is then the next episode's first).
             extras: ``time_outs`` (num_envs,) long: ended by the env's timeout; ``expert_actions``
                 (num_envs,) long: the expert's behavior for the returned obs (-1 without labels);
@@ -200,7 +201,7 @@ class SubprocVecEnv(WorkerVecEnv):
     def __init__(self, config: WorkerEnvConfig, num_envs: int, seed: int = 0, device: str = "cpu",
                  start_method: str = "spawn", reply_timeout_s: float = 300.0):
         if start_method not in ("spawn", "forkserver"):
-            raise ValueError(f"start_method must be 'spawn' or 'forkserver', got {start_method!r}")
+            raise ConfigError(f"start_method must be 'spawn' or 'forkserver', got {start_method!r}")
         self._start_method = start_method
         self._conns, self._procs = [], []
         super().__init__(config, num_envs, seed=seed, device=device, reply_timeout_s=reply_timeout_s)
@@ -332,7 +333,7 @@ def make_vec_env(config: WorkerEnvConfig, num_envs: int, seed: int = 0, backend:
     """The ``VecEnv`` of ``backend`` (one of :data:`BACKENDS`); ``address`` only with ``ray``."""
     if backend == "process":
         if address is not None:
-            raise ValueError("address is for the ray backend only")
+            raise ConfigError("address is for the ray backend only")
         return SubprocVecEnv(config, num_envs, seed=seed, **kwargs)
     if backend == "ray":
         return RayVecEnv(config, num_envs, seed=seed, address=address, **kwargs)

@@ -21,13 +21,8 @@ from typing import Any
 
 import numpy as np
 
-REWARD_MODES = ("dense", "sparse", "env")
-"""Training reward: ``dense`` r_k + r_T (HBMP), ``sparse`` r_T only (HBMP-S), ``env`` the reward the
-environment returns (the flat baseline's control env)."""
-
-INFRACTION_FIELDS = ("collision_vehicle", "collision_pedestrian", "collision_other", "wrong_lane", "off_road",
-                     "red_light")
-"""Episode-record fields summed into the ``infractions`` count of the training log."""
+from hbmp_bench.errors import ConfigError
+from hbmp_bench.vocabulary import INFRACTION_KINDS, TRAINING_REWARD_MODES
 
 
 @dataclass(frozen=True)
@@ -40,7 +35,7 @@ class WorkerEnvConfig:
             ``(name, value)`` pairs, so the config stays immutable; see :attr:`kwargs`.
         entry_point: ``module:Class`` built instead of the id's own class, with the id's registered
             options plus ``env_kwargs`` (the flat baseline's control env); None: the id's class.
-        reward: one of :data:`REWARD_MODES`.
+        reward: one of :data:`~hbmp_bench.vocabulary.TRAINING_REWARD_MODES`.
         expert_labels: also report the rule-based expert's behavior for every observation (DAgger);
             the env is then made with the options the expert asks for (``privileged=True``: its
             info, never the learner's observation, holds the privileged scene).
@@ -55,10 +50,10 @@ class WorkerEnvConfig:
     reward_scale: float = 1.0
 
     def __post_init__(self):
-        if self.reward not in REWARD_MODES:
-            raise ValueError(f"reward must be one of {REWARD_MODES}, got {self.reward!r}")
+        if self.reward not in TRAINING_REWARD_MODES:
+            raise ConfigError(f"reward must be one of {TRAINING_REWARD_MODES}, got {self.reward!r}")
         if not self.reward_scale > 0:
-            raise ValueError(f"reward_scale must be > 0, got {self.reward_scale}")
+            raise ConfigError(f"reward_scale must be > 0, got {self.reward_scale}")
         object.__setattr__(self, "env_kwargs", tuple(sorted((str(k), v) for k, v in dict(self.env_kwargs).items())))
 
     @property
@@ -111,7 +106,7 @@ class EpisodeTally:
             "r_T_plus_r_t": self.r_T + self.r_k,
             "train_return": self.reward,
             "success": bool(record.get("success", False)),
-            "infractions": int(sum(record.get(f, 0) for f in INFRACTION_FIELDS)),
+            "infractions": int(sum(record.get(f, 0) for f in INFRACTION_KINDS)),
             "length": self.length,
             "end_reason": str(record.get("end_reason", "")),
             "route_completion": float(record.get("route_completion", 0.0)),
@@ -121,7 +116,7 @@ class EpisodeTally:
 
 
 def training_reward(mode: str, reward: float, info: dict, scale: float = 1.0) -> float:
-    """The reward the learner sees under ``mode`` (see :data:`REWARD_MODES`), times ``scale``."""
+    """The reward the learner sees under ``mode`` (see :data:`~hbmp_bench.vocabulary.TRAINING_REWARD_MODES`), times ``scale``."""
     if mode == "env":
         return scale * float(reward)
     parts = info["reward_components"]

@@ -11,6 +11,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from hbmp_bench.errors import UserError
+
 TABLE_BEGIN = "<!-- transfer-table:begin -->"
 TABLE_END = "<!-- transfer-table:end -->"
 
@@ -80,9 +82,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from hbmp_bench.transfer.scenes import SCENES, get_scene
 
     if args.episodes <= 0:
-        raise ValueError(f"--episodes must be > 0, got {args.episodes}")
+        raise UserError(f"--episodes must be > 0, got {args.episodes}")
     if args.workers <= 0:
-        raise ValueError(f"--workers must be > 0, got {args.workers}")
+        raise UserError(f"--workers must be > 0, got {args.workers}")
     scenes = [get_scene(s).name for s in (args.scenes or SCENES)]
     for kind in args.observation:
         ObservationConfig(kind=kind)

@@ -11,6 +11,7 @@ from gymnasium import spaces
 
 from hbmp_bench import __version__
 from hbmp_bench.envs.observation import ObservationConfig, observation_space
+from hbmp_bench.errors import ConfigError
 from hbmp_bench.metrics.detectors import EVENT_KINDS
 from hbmp_bench.metrics.episode import EpisodeId, EpisodeScorer, terminal_reward
 from hbmp_bench.metrics.records import EpisodeRecord
@@ -49,11 +50,11 @@ class TransferConfig:
     def __post_init__(self):
         hz = 1.0 / self.decision_period_s if self.decision_period_s > 0 else 0.0
         if not self.decision_period_s > 0 or abs(hz - round(hz)) > 1e-6:
-            raise ValueError(f"decision_period_s must be 1/n s for a whole n (0.1, 0.2, 0.5, 1.0), got {self.decision_period_s!r}")
+            raise ConfigError(f"decision_period_s must be 1/n s for a whole n (0.1, 0.2, 0.5, 1.0), got {self.decision_period_s!r}")
         if not self.speed_step_mps > 0 or not self.lane_change_max_s > 0:
-            raise ValueError("speed_step_mps and lane_change_max_s must be > 0")
+            raise ConfigError("speed_step_mps and lane_change_max_s must be > 0")
         if not self.settle_lateral_m > 0 or not self.settle_heading_rad > 0:
-            raise ValueError("settle_lateral_m and settle_heading_rad must be > 0")
+            raise ConfigError("settle_lateral_m and settle_heading_rad must be > 0")
 
     @property
     def decision_hz(self) -> int:

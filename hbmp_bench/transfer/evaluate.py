@@ -21,6 +21,7 @@ import pandas as pd
 
 from hbmp_bench.agents import load_agent
 from hbmp_bench.envs.observation import ObservationConfig
+from hbmp_bench.errors import UserError
 from hbmp_bench.metrics.records import AGENT_ERROR, EpisodeRecord, latest_per_key, read_records
 from hbmp_bench.rollout import AgentFailed, EnvFailed, run_episode
 from hbmp_bench.transfer.env import HighwayTransferEnv
@@ -42,7 +43,7 @@ def run_transfer_episodes(agent: str, scene: str, episodes: int, observation: st
     get_scene(scene)
     ObservationConfig(kind=observation)
     if episodes <= 0:
-        raise ValueError(f"episodes must be > 0, got {episodes}")
+        raise UserError(f"episodes must be > 0, got {episodes}")
     policy = load_agent(agent)
     road_profile = dict(getattr(policy, "env_kwargs", {})).get("road_profile", "paper")  # R_t it was trained on
     env = HighwayTransferEnv(scene=scene, observation=observation, road_profile=road_profile)
@@ -75,7 +76,7 @@ def observation_of(record: EpisodeRecord | str) -> str:
 def _frame(records: Iterable[EpisodeRecord]) -> pd.DataFrame:
     df = pd.DataFrame([r.to_dict() for r in latest_per_key(records)])
     if df.empty:
-        raise ValueError("no records")
+        raise UserError("no records")
     df["M_t"] = df["fidelity"].map(observation_of)
     return df
 

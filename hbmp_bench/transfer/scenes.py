@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
-from hbmp_bench.errors import UnknownNameError
+from hbmp_bench.errors import ConfigError, UnknownNameError
 
 
 @dataclass(frozen=True)
@@ -69,9 +69,9 @@ class TransferScene:
 
     def __post_init__(self):
         if ":" not in self.env_class:
-            raise ValueError(f"env_class must be 'module:Class', got {self.env_class!r}")
+            raise ConfigError(f"env_class must be 'module:Class', got {self.env_class!r}")
         if not self.speed_limit_mps > 0 or not self.duration_s > 0:
-            raise ValueError("speed_limit_mps and duration_s must be > 0")
+            raise ConfigError("speed_limit_mps and duration_s must be > 0")
         if not isinstance(self.overrides, MappingProxyType):
             object.__setattr__(self, "overrides", MappingProxyType(dict(self.overrides)))
 
