@@ -32,6 +32,7 @@ from hbmp_bench.metrics.episode import EpisodeId, add_events
 from hbmp_bench.metrics.geometry import LaneLocator
 from hbmp_bench.metrics.records import EpisodeRecord
 from hbmp_bench.scenarios import Episode, episode_entropy, road_network
+from hbmp_bench.scenarios.scenario_types import Script, script_for
 from hbmp_bench.sim.sumo import BACKGROUND_TYPE, EGO_TYPE, SumoSim, VehicleType
 
 EGO_ID = "ego"
@@ -67,6 +68,8 @@ class DrivingWorld:
         self._running: set[str] = set()
         self._committed: set[str] = set()
         self.spawned: tuple[int, int] = (0, 0)
+        self.script: Script | None = None
+        """The scripted actors of a scenario-type episode (``scenarios.scenario_types``), else None."""
         """(background vehicles, pedestrians) put into the simulation at the episode's start."""
 
     def make_driver(self, vehicle_id: str, vtype: VehicleType, kind: str):
@@ -106,6 +109,9 @@ class DrivingWorld:
         self.sim.hand_over(EGO_ID)
         self.sim.set_speed(EGO_ID, 0.0)
         routes = self._spawn_traffic(rng, start.edge, controlled)
+        self.script = script_for(episode, self.net, entropy)
+        if self.script is not None:
+            self.script.start(self.sim)
         self.sim.step()
         shared = Shared(self.sim, self.net, self.locator, self.observer, self.config.reward == "dense", self.long_route)
         goal_xy = self.net.position(episode.goal_lane, episode.goal_pos)
@@ -213,6 +219,8 @@ class DrivingWorld:
             if ended:
                 break
             self.sim.step()
+            if self.script is not None:
+                self.script.tick(self.sim, self.sim.vehicle_state(EGO_ID))
             snapshot = self.sim.snapshot()
             self._committed.clear()
             for name in self.live:

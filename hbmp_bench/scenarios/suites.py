@@ -25,6 +25,7 @@ import numpy as np
 
 from hbmp_bench.errors import UnknownNameError
 from hbmp_bench.maps import TOWNS, available_maps, map_hash, map_info, net_path
+from hbmp_bench.scenarios.scenario_types import SCENARIO_TYPES, ScenarioType, scenario_episode
 from hbmp_bench.scenarios.spec import TASKS, Episode, Suite, Traffic
 
 if TYPE_CHECKING:
@@ -132,6 +133,30 @@ for _density in ("empty", "regular", "dense"):
     )
 
 
+for _name, _seed_of, _ends, _what in (
+        ("scenarios", 2026, True, "The paper's protocol: the episode ends at the goal or the first violation."),
+        ("scenarios-lb", 2026, False, "The Leaderboard's protocol: infractions are penalties of the driving "
+         "score, not ends."),
+        ("scenarios-heldout", 2027, True, "A held-out draw of the same types (its own seed) under the paper's "
+         "protocol: whether a ranking on scenarios holds.")):
+    register_suite(
+        Suite(
+            name=_name,
+            towns=TOWNS,
+            tasks=tuple(SCENARIO_TYPES),
+            episodes_per_task=10,
+            seed=_seed_of,
+            end_on_violation=_ends,
+            timeout_speed_kmh=5.0,
+            timeout_extra_s=20.0,
+            density="empty",
+            description="Scenario types (a leader that brakes hard, a cut-in, a pedestrian stepping out ...: "
+            "scenarios.scenario_types), 10 episodes per type in every town it fits, set up by scripted SUMO "
+            f"actors on empty roads; timeout at 5 km/h + 20 s. {_what}",
+        )
+    )
+
+
 def get_suite(name: str | Suite) -> Suite:
     """A registered suite by name (or the suite itself)."""
     if isinstance(name, Suite):
@@ -151,9 +176,9 @@ def check_town(town: str) -> str:
 
 
 def check_task(task: str) -> str:
-    """Return ``task`` if it is a task category, else raise naming the valid ones."""
-    if task not in TASKS:
-        raise UnknownNameError("task", task, TASKS)
+    """Return ``task`` if it is a task category or a scenario type, else raise naming the valid ones."""
+    if task not in TASKS and task not in SCENARIO_TYPES:
+        raise UnknownNameError("task", task, (*TASKS, *SCENARIO_TYPES))
     return task
 
 
@@ -412,6 +437,9 @@ def episode_list(suite_name: str, town: str, task: str) -> tuple[Episode, ...]:
     suite = get_suite(suite_name)
     check_town(town)
     check_task(task)
+    kind = SCENARIO_TYPES.get(task)
+    if kind is not None:
+        return _scenario_episodes(suite, town, kind)
     pose_task = "Navigation" if task == "NavigationDynamic" else task
     traffic = traffic_for(town, task, suite.density)
     episodes = []
@@ -426,6 +454,26 @@ def episode_list(suite_name: str, town: str, task: str) -> tuple[Episode, ...]:
             traffic=traffic,
         )
         episodes.append(dataclasses.replace(episode, task=task))
+    return tuple(episodes)
+
+
+def _scenario_episodes(suite: Suite, town: str, kind: ScenarioType) -> tuple[Episode, ...]:
+    """A scenario type's episodes in a town: episode i draws routes of the type's pose task from its own
+    generator (suite seed, town, type, i) until one fits the type; () where none of its first draws fits
+    (the town cannot host it: a cut-in needs two lanes one way)."""
+    net = road_network(town)
+    traffic = traffic_for(town, kind.pose_task, suite.density)
+    episodes = []
+    for i in range(suite.episodes_per_task):
+        def draw(rng, i=i):
+            return sample_episode(town, kind.pose_task, rng, suite=suite, index=i,
+                                  seed=_seed(suite.seed, town, kind.name, i) % (2**31), traffic=traffic)
+        try:
+            episodes.append(scenario_episode(draw, kind, net, np.random.default_rng(_seed(suite.seed, town, kind.name, i))))
+        except ValueError:
+            if i == 0:
+                return ()
+            raise
     return tuple(episodes)
 
 

@@ -61,6 +61,9 @@ class VehicleType:
 
 EGO_TYPE = VehicleType("hbmp_ego")
 BACKGROUND_TYPE = VehicleType("hbmp_background")
+SCENARIO_TYPE = VehicleType("hbmp_scenario", accel=4.0, decel=8.0, emergency_decel=9.0)
+"""The scripted actors of a scenario type (``scenarios.scenario_types``): they brake as hard as
+a car can (8 m/s²) and accelerate briskly (a cut-in, a red-light runner)."""
 PEDESTRIAN_SIZE_M = 0.6
 """Square footprint side of a pedestrian for collision checks [m]."""
 LEVEL_CLEARANCE_M = 3.0
@@ -161,19 +164,19 @@ def start_traci(args: list[str]) -> traci.connection.Connection:
     deadline = time.monotonic() + TRACI_CONNECT_TIMEOUT_S
     while True:
         port = _free_port()
-        log = tempfile.TemporaryFile()
-        proc = subprocess.Popen([*args, "--remote-port", str(port)], stdout=subprocess.DEVNULL, stderr=log)
-        while proc.poll() is None and time.monotonic() < deadline:
-            try:
-                return traci.connection.Connection("localhost", port, proc, None, True, None)
-            except OSError:
-                time.sleep(0.02)
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-            raise RuntimeError(f"sumo did not accept a TraCI connection within {TRACI_CONNECT_TIMEOUT_S} s")
-        log.seek(0)
-        message = log.read().decode(errors="replace").strip()
+        with tempfile.TemporaryFile() as log:  # the child writes to its own copy; ours closes here
+            proc = subprocess.Popen([*args, "--remote-port", str(port)], stdout=subprocess.DEVNULL, stderr=log)
+            while proc.poll() is None and time.monotonic() < deadline:
+                try:
+                    return traci.connection.Connection("localhost", port, proc, None, True, None)
+                except OSError:
+                    time.sleep(0.02)
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+                raise RuntimeError(f"sumo did not accept a TraCI connection within {TRACI_CONNECT_TIMEOUT_S} s")
+            log.seek(0)
+            message = log.read().decode(errors="replace").strip()
         if "bind" not in message.lower() or time.monotonic() >= deadline:
             raise RuntimeError(f"sumo exited with {proc.returncode} before accepting TraCI: {message}")
 
@@ -257,7 +260,7 @@ class SumoSim:
         self._snapshot_dims = None
         self._routes = 0
         types = self._api.vehicletype
-        for vtype in (EGO_TYPE, BACKGROUND_TYPE):
+        for vtype in (EGO_TYPE, BACKGROUND_TYPE, SCENARIO_TYPE):
             types.copy("DEFAULT_VEHTYPE", vtype.id)
             types.setLength(vtype.id, vtype.length)
             types.setWidth(vtype.id, vtype.width)
@@ -520,6 +523,39 @@ class SumoSim:
         braking (only its acceleration limits), so the agent can and must avoid infractions."""
         self._api.vehicle.setLaneChangeMode(vehicle_id, 0)
         self._api.vehicle.setSpeedMode(vehicle_id, 0b000110)
+
+    def give_back(self, vehicle_id: str) -> None:
+        """Undo :meth:`hand_over` and any :meth:`set_speed`: SUMO's own driver again (its lane
+        changes, safe speeds and red-light braking)."""
+        self._api.vehicle.setSpeed(vehicle_id, -1.0)
+        self._api.vehicle.setSpeedMode(vehicle_id, 31)
+        self._api.vehicle.setLaneChangeMode(vehicle_id, 1621)
+
+    def run_red_lights(self, vehicle_id: str) -> None:
+        """Keep SUMO's car following and its acceleration limits but ignore red lights and the right
+        of way at junctions (a scenario's red-light runner); no lane changes of its own."""
+        self._api.vehicle.setLaneChangeMode(vehicle_id, 0)
+        self._api.vehicle.setSpeedMode(vehicle_id, 0b000111)
+
+    def add_walker(self, person_id: str, edge: str, pos: float) -> None:
+        """Insert a pedestrian at ``pos`` [m] on ``edge`` that stands still until moved by
+        :meth:`move_person_to_xy` (a scenario's scripted pedestrian)."""
+        self._api.person.add(person_id, edge, pos, depart=tc.DEPARTFLAG_NOW)
+        self._api.person.appendWaitingStage(person_id, 1e6)
+        self._api.person.subscribe(person_id, _SUBSCRIBED)
+        self._dims[person_id] = (PEDESTRIAN_SIZE_M, PEDESTRIAN_SIZE_M, True)
+
+    def move_person_to_xy(self, person_id: str, xy: np.ndarray, yaw: float) -> None:
+        """Place a pedestrian at ``xy`` [m] facing ``yaw`` [rad] in the next step, on a road lane too."""
+        self._api.person.moveToXY(person_id, "", float(xy[0]), float(xy[1]), yaw_to_sumo_angle(yaw), 2)
+
+    def remove_person(self, person_id: str) -> None:
+        """Take a pedestrian out of the simulation (no-op if it is already gone)."""
+        try:
+            self._api.person.unsubscribe(person_id)
+            self._api.person.remove(person_id)
+        except _SUMO_ERRORS:
+            pass
 
     def set_speed(self, vehicle_id: str, speed: float) -> None:
         """Target speed [m/s], reached within the vehicle type's acceleration limits."""

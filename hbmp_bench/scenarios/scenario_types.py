@@ -1,0 +1,460 @@
+"""Scenario types: the hazards of the ``scenarios`` suite, each a route of the town and a script of
+real SUMO actors that sets the hazard up around the ego (CARLA Leaderboard / Bench2Drive style).
+
+A scenario type is a task name (``HardBrake``, ``CutIn`` ...) of the records and reports. Its episodes
+are drawn like the other suites' (:func:`scenario_episode`: a pure function of the suite seed, the town
+and the index), from the routes of its ``pose_task`` on which the hazard fits (``fits``). The world runs
+its :class:`Script` (``script_for``): ``start`` once after the ego is inserted, ``tick`` after every SUMO
+step. Scripts drive SUMO vehicles and pedestrians through :class:`~hbmp_bench.sim.sumo.SumoSim` only
+(inserting them, setting their speeds, lanes and signal obedience, walking a pedestrian across the road);
+the ego is never moved. Every script logs what it did and when in ``events`` ((time [s], what)), which
+the tests check against where the actors were.
+
+Triggers are set so that a lawful driver can pass: a hazard starts where the ego, at the speed it has,
+can still stop (``stopping_room_m``: 1 s of reaction and 3.5 m/s²) unless the hazard is one of keeping a
+gap (a leader that brakes: the gap is the ego's to keep).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from hbmp_bench.scenarios.spec import Episode
+
+if TYPE_CHECKING:
+    from hbmp_bench.maps.roadnet import RoadNetwork
+    from hbmp_bench.sim.sumo import SumoSim, VehicleState
+
+WALK_SPEED_MPS = 1.4
+"""How fast a scripted pedestrian crosses the road [m/s]."""
+REACTION_S = 1.0
+COMFORT_DECEL_MPS2 = 3.5
+
+
+def stopping_room_m(speed_mps: float) -> float:
+    """Distance [m] a lawful driver at ``speed_mps`` needs to stop: 1 s of reaction, then 3.5 m/s²."""
+    return speed_mps * REACTION_S + speed_mps**2 / (2 * COMFORT_DECEL_MPS2)
+
+
+class Script:
+    """The scripted actors of one episode (see the module docstring).
+
+    Attributes:
+        events: (time [s], what) of every step of the hazard, in order.
+    """
+
+    def __init__(self, episode: Episode, net: RoadNetwork, rng: np.random.Generator):
+        self.episode, self.net, self.rng = episode, net, rng
+        self.events: list[tuple[float, str]] = []
+
+    def log(self, sim: SumoSim, what: str) -> None:
+        self.events.append((round(sim.time, 2), what))
+
+    def start(self, sim: SumoSim) -> None:
+        """Insert what stands or drives from the first step (after the ego's insertion)."""
+
+    def tick(self, sim: SumoSim, ego: VehicleState | None) -> None:
+        """Advance the hazard after a SUMO step (``ego``: the ego now, None once it is gone)."""
+
+
+def _forward(net: RoadNetwork, lane_id: str, pos: float) -> tuple[np.ndarray, np.ndarray]:
+    """The point (2,) [m] at ``pos`` of a lane and the lane's unit direction (2,) there."""
+    a, b = net.position(lane_id, max(pos - 1.0, 0.0)), net.position(lane_id, pos + 1.0)
+    d = b - a
+    return net.position(lane_id, pos), d / max(float(np.hypot(*d)), 1e-9)
+
+
+def _remaining_m(net: RoadNetwork, episode: Episode) -> float:
+    """Length [m] of the start edge ahead of the ego's start."""
+    return net.edge_length[episode.route[0]] - episode.start_pos
+
+
+# ------------------------------------------------------------------ HardBrake
+class HardBrake(Script):
+    """A leader 30 m ahead on the ego's lane and route drives off with SUMO's driver at 70 % of the
+    speed limit; once it is faster than 6 m/s and the ego within 25 m behind it (or it has driven
+    120 m), it brakes to a stop at 8 m/s², stands 3 s and drives on."""
+
+    LEADER = "sc_leader"
+    AHEAD_M = 30.0
+
+    def __init__(self, episode, net, rng):
+        super().__init__(episode, net, rng)
+        self.phase, self.stopped_at = "follow", math.inf
+
+    def start(self, sim):
+        from hbmp_bench.sim.sumo import SCENARIO_TYPE
+
+        ep = self.episode
+        sim.add_vehicle(self.LEADER, ep.route, lane_index=self.net.lane(ep.start_lane).index,
+                        pos=ep.start_pos + self.AHEAD_M, speed=0.0, vtype=SCENARIO_TYPE)
+        sim.track_lane(self.LEADER)
+        sim.set_speed(self.LEADER, 0.7 * self.net.lane(ep.start_lane).speed)  # SUMO's driver, lawful below it
+        self.start_xy = self.net.position(ep.start_lane, ep.start_pos + self.AHEAD_M)
+        self.log(sim, "leader")
+
+    def tick(self, sim, ego):
+        leader = sim.vehicle_state(self.LEADER)
+        if leader is None or ego is None:
+            return
+        if self.phase == "follow":
+            gap = float(np.hypot(*(leader.xy - ego.xy))) - SCENARIO_LENGTH_M
+            driven = float(np.hypot(*(leader.xy - self.start_xy)))
+            if leader.speed >= 6.0 and (gap <= 25.0 or driven >= 120.0):
+                sim.hand_over(self.LEADER)
+                sim.set_speed(self.LEADER, 0.0)
+                self.phase = "braking"
+                self.log(sim, f"braking from {leader.speed:.1f} m/s, {gap:.1f} m ahead")
+        elif self.phase == "braking" and leader.speed < 0.05:
+            self.phase, self.stopped_at = "stopped", sim.time
+            self.log(sim, "stopped")
+        elif self.phase == "stopped" and sim.time >= self.stopped_at + 3.0:
+            sim.give_back(self.LEADER)
+            self.phase = "gone"
+            self.log(sim, "drives on")
+
+
+# ------------------------------------------------------------------ CutIn
+class CutIn(Script):
+    """Once the ego is faster than 6 m/s on its start edge, a car appears beside it in the next lane,
+    overtakes 3-4 m/s faster and changes into the ego's lane ``gap_m`` (4-8 m) ahead of its front bumper,
+    then slows to the ego's speed and drives on with SUMO's driver."""
+
+    CUTTER = "sc_cutter"
+
+    def __init__(self, episode, net, rng):
+        super().__init__(episode, net, rng)
+        self.gap_m = float(rng.uniform(4.0, 8.0))
+        self.extra_mps = float(rng.uniform(3.0, 4.0))
+        self.side = _cut_in_side(net, episode)
+        self.phase, self.cut_at = "wait", math.inf
+
+    def tick(self, sim, ego):
+        from hbmp_bench.sim.sumo import SCENARIO_TYPE
+
+        ep, net = self.episode, self.net
+        if ego is None:
+            return
+        edge = ep.route[0]
+        if self.phase == "wait":
+            if ego.lane.startswith(":") or net.lane(ego.lane).edge != edge or ego.speed < 6.0:
+                return
+            if net.edge_length[edge] - ego.lane_pos < 70.0:
+                self.phase = "missed"
+                self.log(sim, "no room left for the cut-in")
+                return
+            lane = net.neighbour_lane(ego.lane, self.side)
+            if lane is None:
+                return
+            sim.add_vehicle(self.CUTTER, ep.route[ep.route.index(edge):], lane_index=net.lane(lane).index,
+                            pos=max(ego.lane_pos - 6.0, 5.0), speed=ego.speed + self.extra_mps, vtype=SCENARIO_TYPE)
+            sim.hand_over(self.CUTTER)
+            sim.track_lane(self.CUTTER)
+            sim.set_speed(self.CUTTER, ego.speed + self.extra_mps)
+            self.phase = "overtake"
+            self.log(sim, f"beside, in {lane}")
+            return
+        cutter = sim.vehicle_state(self.CUTTER)
+        if cutter is None:
+            return
+        if self.phase == "overtake":
+            if cutter.lane.startswith(":") or ego.lane.startswith(":"):
+                sim.give_back(self.CUTTER)
+                self.phase = "missed"
+                self.log(sim, "reached the junction before cutting in")
+                return
+            sim.set_speed(self.CUTTER, ego.speed + self.extra_mps)
+            rear_gap = cutter.lane_pos - SCENARIO_LENGTH_M - ego.lane_pos
+            if rear_gap >= self.gap_m:
+                sim.change_lane(self.CUTTER, net.lane(ego.lane).index)
+                self.phase, self.cut_at = "cut", sim.time
+                self.log(sim, f"cuts in {rear_gap:.1f} m ahead at {cutter.speed:.1f} m/s (ego {ego.speed:.1f} m/s)")
+        elif self.phase == "cut" and sim.time >= self.cut_at + 2.0:
+            sim.give_back(self.CUTTER)
+            self.phase = "gone"
+            self.log(sim, f"drives on in {cutter.lane}")
+
+
+SCENARIO_LENGTH_M = 4.5
+"""Length of a scripted car (``SCENARIO_TYPE``) [m]."""
+
+
+def _cut_in_side(net: RoadNetwork, episode: Episode) -> int:
+    """+1 (from the left) if the start lane has a lane on its left, else -1, 0 if neither."""
+    for side in (1, -1):
+        if net.neighbour_lane(episode.start_lane, side) is not None:
+            return side
+    return 0
+
+
+# ------------------------------------------------------------------ PedestrianStepsOut
+class PedestrianStepsOut(Script):
+    """A pedestrian stands at the right kerb 70 m ahead of the ego's start; when the ego, at its speed,
+    comes within its stopping room and 10 m of that point, they walk across the road at 1.4 m/s (the
+    ego's edge and the edge opposite it), and are gone once on the far side."""
+
+    PERSON = "sc_pedestrian"
+    AHEAD_M = 70.0
+
+    def __init__(self, episode, net, rng):
+        super().__init__(episode, net, rng)
+        lanes = net.edge_lanes[episode.route[0]]
+        self.at_m = episode.start_pos + self.AHEAD_M
+        right = net.lane(lanes[0])
+        centre, forward = _forward(net, right.id, self.at_m)
+        self.left = np.array([-forward[1], forward[0]])
+        width = sum(net.lane(ln).width for ln in lanes)
+        opposite = net.opposite.get(episode.route[0])
+        if opposite in net.edge_lanes:
+            width += sum(net.lane(ln).width for ln in net.edge_lanes[opposite])
+        self.kerb = centre - self.left * (right.width / 2 + 0.8)
+        self.walk_m = width + 1.6
+        self.phase, self.walked = "wait", 0.0
+
+    def start(self, sim):
+        sim.add_walker(self.PERSON, self.net.walkable_edges[0], 0.5)
+        sim.move_person_to_xy(self.PERSON, self.kerb, math.atan2(self.left[1], self.left[0]))
+        self.log(sim, "at the kerb")
+
+    def tick(self, sim, ego):
+        yaw = math.atan2(self.left[1], self.left[0])
+        if self.phase == "wait":
+            sim.move_person_to_xy(self.PERSON, self.kerb, yaw)
+            if ego is None or ego.lane.startswith(":") or self.net.lane(ego.lane).edge != self.episode.route[0]:
+                return
+            ahead = self.at_m - ego.lane_pos
+            if ahead <= max(stopping_room_m(ego.speed), 10.0) + 10.0 and ego.speed > 1.0:
+                self.phase = "walk"
+                self.log(sim, f"steps out {ahead:.1f} m ahead of the ego at {ego.speed:.1f} m/s")
+        elif self.phase == "walk":
+            self.walked += WALK_SPEED_MPS * sim.step_length
+            sim.move_person_to_xy(self.PERSON, self.kerb + self.left * self.walked, yaw)
+            if self.walked >= self.walk_m:
+                sim.remove_person(self.PERSON)
+                self.phase = "gone"
+                self.log(sim, "across")
+
+
+# ------------------------------------------------------------------ junction hazards
+@dataclass(frozen=True)
+class JunctionHazard:
+    """Where a junction hazard happens: the ``k``-th junction of the route (``route[k]`` to
+    ``route[k + 1]``), the ego's link there and the foe link its actors drive, ``ahead_m`` [m] from the
+    ego's start to the junction's stop line."""
+
+    k: int
+    link: object
+    foe: object
+    ahead_m: float
+
+
+def _opposite_heading(net: RoadNetwork, edge: str, other: str) -> float:
+    """Angle [rad] between the ends of two edges' rightmost lanes as they enter their junction."""
+    def end_heading(e):
+        shape = net.lane(net.edge_lanes[e][0]).shape
+        d = shape[-1] - shape[-2]
+        return math.atan2(d[1], d[0])
+    a = end_heading(edge) - end_heading(other)
+    return abs((a + math.pi) % (2 * math.pi) - math.pi)
+
+
+def junction_hazard(net: RoadNetwork, episode: Episode, kind: str) -> JunctionHazard | None:
+    """The first junction 40-400 m along the route where ``kind`` can happen, None if none:
+
+    - ``unprotected_left``: the ego turns left at a light (link direction ``l``) across the straight
+      link of the approach opposite it (within 30 degrees of head-on);
+    - ``give_way``: the ego's link has no light and yields (SUMO state ``m``) to a major link (``M``)
+      that crosses it;
+    - ``red_light``: the ego goes straight at a light across the straight link of an approach at
+      60-120 degrees to its own.
+    """
+    ahead = net.edge_length[episode.route[0]] - episode.start_pos
+    for k, (a, b) in enumerate(zip(episode.route[:-1], episode.route[1:])):
+        if ahead > 400.0:
+            return None
+        links = net.links(a, b)
+        if ahead >= 40.0 and links:
+            link = links[0]
+            for c in net.link_conflicts(link):
+                foe = c.foe
+                if c.at_m <= 0.0 or net.edge_length[foe.from_edge] < 60.0:
+                    continue
+                angle = _opposite_heading(net, a, foe.from_edge)
+                if kind == "unprotected_left" and link.direction == "l" and link.tls and foe.direction == "s" \
+                        and angle > math.radians(150):
+                    return JunctionHazard(k, link, foe, ahead)
+                if kind == "give_way" and not link.tls and link.state == "m" and foe.state == "M":
+                    return JunctionHazard(k, link, foe, ahead)
+                if kind == "red_light" and link.direction == "s" and link.tls and foe.tls and foe.direction == "s" \
+                        and math.radians(60) < angle < math.radians(120):
+                    return JunctionHazard(k, link, foe, ahead)
+        ahead += net.junction_length(a, b) + net.edge_length[b]
+    return None
+
+
+def _to_junction_m(net: RoadNetwork, episode: Episode, hazard: JunctionHazard, ego: VehicleState) -> float:
+    """Distance [m] from the ego's front bumper to the hazard junction's stop line (negative past it,
+    -inf once beyond the junction)."""
+    if ego.route_index > hazard.k:
+        return -math.inf
+    lane_end = net.edge_length[episode.route[ego.route_index]]
+    if ego.lane.startswith(":"):
+        return 0.0 if ego.route_index == hazard.k else lane_end
+    return lane_end - ego.lane_pos + sum(net.edge_length[e] for e in episode.route[ego.route_index + 1:hazard.k + 1])
+
+
+class CrossTraffic(Script):
+    """A stream of ``count`` cars on a foe link of a junction of the route (``hazard_kind``, see
+    :func:`junction_hazard`), one every ``headway_s`` from when the ego is 100 m from the junction, each
+    inserted 50 m before its stop line at 80 % of its lane's limit and driven by SUMO (which keeps its
+    lights and right of way). Subclasses name the hazard and draw the stream."""
+
+    hazard_kind = ""
+    count_range = (4, 7)
+    headway_range = (2.5, 4.0)
+
+    def __init__(self, episode, net, rng):
+        super().__init__(episode, net, rng)
+        self.hazard = junction_hazard(net, episode, self.hazard_kind)
+        self.count = int(rng.integers(self.count_range[0], self.count_range[1] + 1))
+        self.headway_s = float(rng.uniform(*self.headway_range))
+        self.sent, self.next_at = 0, math.inf
+
+    def tick(self, sim, ego):
+        from hbmp_bench.sim.sumo import SCENARIO_TYPE
+
+        if ego is None or self.hazard is None or self.sent >= self.count:
+            return
+        net, foe = self.net, self.hazard.foe
+        if self.next_at == math.inf:
+            if _to_junction_m(net, self.episode, self.hazard, ego) > 100.0:
+                return
+            self.next_at = sim.time
+            self.log(sim, f"stream of {self.count} on {foe.from_lane}, one every {self.headway_s:.1f} s")
+        if sim.time + 1e-9 < self.next_at:
+            return
+        lane = net.lane(foe.from_lane)
+        name = f"sc_cross{self.sent}"
+        sim.add_vehicle(name, (foe.from_edge, foe.to_edge, *_onwards(net, foe.to_edge)), lane_index=lane.index,
+                        pos=max(lane.length - 50.0, 1.0), speed=0.8 * lane.speed, vtype=SCENARIO_TYPE)
+        sim.set_speed(name, 0.8 * lane.speed)
+        self.sent += 1
+        self.next_at = sim.time + self.headway_s
+        self.log(sim, f"{name} inserted")
+
+
+def _onwards(net: RoadNetwork, edge: str, min_m: float = 150.0) -> tuple[str, ...]:
+    """Edges after ``edge`` (the first successor each time) for at least ``min_m`` [m] or to a dead end."""
+    out, total = [], 0.0
+    while total < min_m:
+        nxt = net.successors(edge)
+        if not nxt or nxt[0] in out:
+            break
+        edge = nxt[0]
+        out.append(edge)
+        total += net.edge_length[edge]
+    return tuple(out)
+
+
+class UnprotectedLeft(CrossTraffic):
+    """The ego turns left at a light while 4-7 oncoming cars go straight through on their green, one
+    every 2.5-4 s: it must wait for a gap."""
+
+    hazard_kind = "unprotected_left"
+
+
+class GiveWay(CrossTraffic):
+    """The ego's road yields at an unsignalised junction to a priority road on which 4-7 cars cross,
+    one every 2.5-4 s: it must give way."""
+
+    hazard_kind = "give_way"
+
+
+# ------------------------------------------------------------------ registry
+@dataclass(frozen=True)
+class ScenarioType:
+    """A hazard: its task name, the ability it tests, how its routes are drawn and what it needs.
+
+    Attributes:
+        name: task name in episodes and records.
+        ability: the group of the ability table (Bench2Drive-like).
+        pose_task: the task category whose routes it is drawn from (``Straight`` ...).
+        fits: whether an episode's route and town can host it.
+        script: the :class:`Script` class that sets it up.
+        description: one sentence.
+    """
+
+    name: str
+    ability: str
+    pose_task: str
+    fits: Callable[[RoadNetwork, Episode], bool]
+    script: type[Script]
+    description: str
+
+
+SCENARIO_TYPES: dict[str, ScenarioType] = {}
+
+
+def register_scenario_type(kind: ScenarioType) -> ScenarioType:
+    if kind.name in SCENARIO_TYPES:
+        raise ValueError(f"scenario type {kind.name!r} is already registered")
+    SCENARIO_TYPES[kind.name] = kind
+    return kind
+
+
+register_scenario_type(ScenarioType(
+    "HardBrake", "Emergency brake", "Straight",
+    lambda net, ep: _remaining_m(net, ep) >= HardBrake.AHEAD_M + 30.0,
+    HardBrake, HardBrake.__doc__.split(";")[0]))
+register_scenario_type(ScenarioType(
+    "CutIn", "Merging", "Straight",
+    lambda net, ep: _remaining_m(net, ep) >= 100.0 and _cut_in_side(net, ep) != 0,
+    CutIn, "A faster car overtakes in the next lane and cuts in 4-8 m ahead."))
+register_scenario_type(ScenarioType(
+    "PedestrianStepsOut", "Pedestrians", "Straight",
+    lambda net, ep: _remaining_m(net, ep) >= PedestrianStepsOut.AHEAD_M + 20.0 and bool(net.walkable_edges),
+    PedestrianStepsOut, "A pedestrian steps off the kerb ahead and walks across the road."))
+
+
+register_scenario_type(ScenarioType(
+    "UnprotectedLeft", "Intersections", "OneTurn",
+    lambda net, ep: junction_hazard(net, ep, "unprotected_left") is not None,
+    UnprotectedLeft, "A left turn at a light across a stream of oncoming cars."))
+register_scenario_type(ScenarioType(
+    "GiveWay", "Give way", "Navigation",
+    lambda net, ep: junction_hazard(net, ep, "give_way") is not None,
+    GiveWay, "An unsignalised junction where the ego yields to cars crossing on the priority road."))
+
+
+def check_scenario_type(name: str) -> ScenarioType:
+    from hbmp_bench.errors import UnknownNameError
+
+    try:
+        return SCENARIO_TYPES[name]
+    except KeyError:
+        raise UnknownNameError("scenario type", name, SCENARIO_TYPES) from None
+
+
+def script_for(episode: Episode, net: RoadNetwork, entropy: list[int]) -> Script | None:
+    """The script of an episode whose task is a scenario type (its random stream from the episode's
+    entropy), None for the other tasks."""
+    kind = SCENARIO_TYPES.get(episode.task)
+    if kind is None:
+        return None
+    return kind.script(episode, net, np.random.default_rng([*entropy, 0x5C]))
+
+
+def scenario_episode(draw: Callable[[np.random.Generator], Episode], kind: ScenarioType, net: RoadNetwork,
+                     rng: np.random.Generator, attempts: int = 200) -> Episode:
+    """The first episode ``draw`` gives with ``rng`` whose route fits ``kind``, with the task renamed."""
+    for _ in range(attempts):
+        episode = draw(rng)
+        if kind.fits(net, episode):
+            return dataclasses.replace(episode, task=kind.name)
+    raise ValueError(f"no route of {kind.pose_task} fits {kind.name} in {attempts} draws")
