@@ -12,7 +12,8 @@ from hbmp_bench.errors import Interrupted, UnknownNameError, UserError
 from hbmp_bench.vocabulary import FIDELITIES
 
 COMMAND_MODULES: tuple[str, ...] = ("hbmp_bench.render.commands", "hbmp_bench.transfer.commands",
-                                    "hbmp_bench.evaluation.commands", "hbmp_bench.training.commands", "hbmp_bench.bench")
+                                    "hbmp_bench.evaluation.commands", "hbmp_bench.training.commands", "hbmp_bench.bench",
+                                    "hbmp_bench.site.commands")
 """Modules that add their own sub-commands: each has ``add_commands(subparsers)``, whose parsers
 set ``func`` (``args -> exit code``). Keeps each room's commands beside its code."""
 
