@@ -2,19 +2,13 @@
 
 from __future__ import annotations
 
-from typing import Any
-
-import gymnasium as gym
-import numpy as np
-
 from hbmp_bench.envs.config import WorldConfig
-from hbmp_bench.envs.observation import ObservationConfig
+from hbmp_bench.envs.ego_view import EgoView, keyword_signature
 from hbmp_bench.envs.traffic_v0 import TrafficParallelEnv
-from hbmp_bench.envs.world import EGO_ID
-from hbmp_bench.planning.behaviors import BEHAVIORS
+from hbmp_bench.errors import ConfigError
 
 
-class BehaviorEnv(gym.Env):
+class BehaviorEnv(EgoView):
     """HBMP behavior environment.
 
     ## Description
@@ -53,10 +47,12 @@ class BehaviorEnv(gym.Env):
     ``info["episode"]`` then holds the episode record.
 
     ## Arguments
+    Keyword-only: ``scenario`` / ``world`` (the frozen configs), or their keyword form, with the
+    defaults of :func:`~hbmp_bench.envs.config.env_configs` (the same for every env of the package):
     town, task: which scenario (``Town01``..``Town05`` or an imported map; ``Straight``, ``OneTurn``,
         ``Navigation``, ``NavigationDynamic``).
     suite: episode list and rules (``corl2017`` default, ``hbmp``, ``nocrash-*``).
-    episode_index: fix one episode of the list; None cycles by reset seed (seed % episodes).
+    episode_index: fix one episode of the list; None draws one per reset from the reset seed.
     random_goals: ignore the suite list and draw a fresh start and goal every reset (training).
     fidelity, reward, decision_period_s: see :class:`WorldConfig` (None: its defaults).
     observation: ``deformed`` or ``vehicle_centric`` M_t; grid options via ``observation_config``.
@@ -66,104 +62,24 @@ class BehaviorEnv(gym.Env):
         value raises ValueError here.
     privileged: add the privileged fields to ``info["scene"]`` (the rule-based expert's; see
         :class:`WorldConfig`); default off.
+    render_mode: None or ``rgb_array``.
 
     ## Implementation
     The parallel env (:class:`~hbmp_bench.envs.traffic_v0.TrafficParallelEnv`) with no background
-    agent, seen from the ego: one implementation for both.
+    agent, seen from the ego (:class:`~hbmp_bench.envs.ego_view.EgoView`): one implementation for both.
 
     ## Version history
     v0: first release.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    def __init__(self, **kwargs):
+        scenario, world = kwargs.pop("scenario", None), kwargs.pop("world", None)
+        parallel = TrafficParallelEnv(scenario=scenario, world=world, controlled="none",
+                                      render_mode=kwargs.pop("render_mode", None), **kwargs)
+        if parallel.config.ego_driver != "behavior":
+            raise ConfigError(f"BehaviorEnv runs the behavior layer (ego_driver='behavior'), got "
+                             f"{parallel.config.ego_driver!r}: the control driver's env is ControlEnv")
+        super().__init__(parallel)
 
-    def __init__(
-        self,
-        town: str = "Town01",
-        task: str = "Navigation",
-        suite: str = "corl2017",
-        episode_index: int | None = None,
-        random_goals: bool = False,
-        fidelity: str | None = None,
-        reward: str = "dense",
-        decision_period_s: float = 0.1,
-        observation: str = "deformed",
-        observation_config: ObservationConfig | None = None,
-        road_profile: str = "paper",
-        density: str | None = None,
-        render_mode: str | None = None,
-        privileged: bool = False,
-    ):
-        if render_mode not in (None, *self.metadata["render_modes"]):
-            raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None, 'rgb_array'")
-        self.parallel = TrafficParallelEnv(
-            town=town, task=task, suite=suite, episode_index=episode_index, random_goals=random_goals,
-            density=density, controlled="none", ego_fidelity=WorldConfig.fidelity if fidelity is None else fidelity,
-            reward=reward, decision_period_s=decision_period_s, observation=observation,
-            observation_config=observation_config, road_profile=road_profile, render_mode=render_mode,
-            privileged=privileged)
-        self.action_space = self.parallel.action_space(EGO_ID)
-        self.observation_space = self.parallel.observation_space(EGO_ID)
-        self.render_mode = render_mode
 
-    @property
-    def scenario(self):
-        """The scenario (:class:`~hbmp_bench.envs.config.ScenarioConfig`)."""
-        return self.parallel.scenario
-
-    @property
-    def config(self) -> WorldConfig:
-        return self.parallel.config
-
-    @property
-    def town(self) -> str:
-        return self.scenario.town
-
-    @property
-    def task(self) -> str:
-        return self.scenario.task
-
-    @property
-    def episodes(self):
-        return self.scenario.episodes
-
-    @property
-    def traffic(self):
-        """The background traffic ``density`` sets for every episode (None: each episode's own)."""
-        return self.scenario.traffic
-
-    @property
-    def world(self):
-        """The driving world (:class:`~hbmp_bench.envs.world.DrivingWorld`)."""
-        return self.parallel.world
-
-    def record(self, agent: str = ""):
-        """The episode record so far (None before the first reset)."""
-        return self.parallel.record(agent)
-
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        super().reset(seed=seed)
-        obs, infos = self.parallel.reset(seed=seed, options=options)
-        return obs[EGO_ID], infos[EGO_ID]
-
-    def step(self, action):
-        if EGO_ID not in self.parallel.agents:
-            raise RuntimeError("call reset() before step() (and again after an episode ends)")
-        if isinstance(action, (bool, np.bool_)) or not (
-                self.action_space.contains(action) or isinstance(action, (int, np.integer)) and 0 <= int(action) < 5):
-            raise ValueError(f"action must be an int in [0, {len(BEHAVIORS)}) ({', '.join(BEHAVIORS)}), "
-                             f"got {type(action).__name__} {action!r}")
-        obs, rewards, terms, truncs, infos = self.parallel.step({EGO_ID: int(action)})
-        return obs[EGO_ID], rewards[EGO_ID], terms[EGO_ID], truncs[EGO_ID], infos[EGO_ID]
-
-    def render(self) -> np.ndarray | None:
-        """``rgb_array``: the top-down view now, (H, W, 3) uint8 (see :mod:`hbmp_bench.render`)."""
-        return self.parallel.render()
-
-    def drain_frames(self) -> list[np.ndarray]:
-        """All frames rendered at every 0.1 s simulation step since the last call (the frames
-        between decisions), oldest first; empty unless ``render_mode="rgb_array"``."""
-        return self.parallel.drain_frames()
-
-    def close(self):
-        self.parallel.close()
+BehaviorEnv.__signature__ = keyword_signature(BehaviorEnv)

@@ -1,5 +1,9 @@
 """The frozen configurations of an environment: which scenario (:class:`ScenarioConfig`) and how
-its world runs (:class:`WorldConfig`). Each validates its fields in one place, at construction."""
+its world runs (:class:`WorldConfig`). Each validates its fields in one place, at construction.
+
+:func:`env_configs` is the keyword form every env of the package accepts (``gym.make(id, **kwargs)``,
+``traffic_v0.parallel_env(**kwargs)``): it builds both configs, with their own defaults, so that
+every front door has the same options and the same defaults."""
 
 from __future__ import annotations
 
@@ -14,6 +18,7 @@ from hbmp_bench.envs.observation import ObservationConfig
 from hbmp_bench.planning.behaviors import BehaviorConfig
 from hbmp_bench.scenarios import (Episode, Traffic, check_task, check_town, get_suite, sample_episode,
                                   suite_episodes, traffic_for)
+from hbmp_bench.errors import ConfigError
 
 REWARDS = ("dense", "sparse")
 EGO_DRIVERS = ("behavior", "control")
@@ -25,7 +30,8 @@ class ScenarioConfig:
 
     Attributes:
         town: map name (``Town01``..``Town05`` or an imported map).
-        task: ``Straight``, ``OneTurn``, ``Navigation`` or ``NavigationDynamic``.
+        task: ``Straight``, ``OneTurn``, ``Navigation`` or ``NavigationDynamic`` (default: the
+            category with traffic, so that the parallel env has background agents by default).
         suite: episode list and rules (``corl2017``, ``hbmp``, ``nocrash-*``).
         episode_index: fix one episode of the list; None draws one per reset from the env's
             generator (the reset seed).
@@ -35,11 +41,11 @@ class ScenarioConfig:
 
     Raises:
         UnknownNameError: an unknown town, task, suite or density (naming the valid ones).
-        ValueError: ``episode_index`` outside the list, or given with ``random_goals``.
+        ConfigError: ``episode_index`` outside the list, or given with ``random_goals`` (a ValueError).
     """
 
     town: str = "Town01"
-    task: str = "Navigation"
+    task: str = "NavigationDynamic"
     suite: str = "corl2017"
     episode_index: int | None = None
     random_goals: bool = False
@@ -53,9 +59,9 @@ class ScenarioConfig:
             traffic_for(self.town, self.task, self.density)
         if self.episode_index is not None:
             if self.random_goals:
-                raise ValueError("episode_index and random_goals exclude each other")
+                raise ConfigError("episode_index and random_goals exclude each other")
             if not 0 <= self.episode_index < len(self.episodes):
-                raise ValueError(f"episode_index must be in [0, {len(self.episodes)}), got {self.episode_index}")
+                raise ConfigError(f"episode_index must be in [0, {len(self.episodes)}), got {self.episode_index}")
 
     @cached_property
     def traffic(self) -> Traffic | None:
@@ -140,23 +146,61 @@ class WorldConfig:
 
     def __post_init__(self):
         if not isinstance(self.privileged, bool):
-            raise ValueError(f"privileged must be True or False, got {self.privileged!r}")
+            raise ConfigError(f"privileged must be True or False, got {self.privileged!r}")
         if self.fidelity not in FIDELITIES:
-            raise ValueError(f"fidelity must be one of {FIDELITIES}, got {self.fidelity!r}")
+            raise ConfigError(f"fidelity must be one of {FIDELITIES}, got {self.fidelity!r}")
         if self.ego_driver not in EGO_DRIVERS:
-            raise ValueError(f"ego_driver must be one of {EGO_DRIVERS}, got {self.ego_driver!r}")
+            raise ConfigError(f"ego_driver must be one of {EGO_DRIVERS}, got {self.ego_driver!r}")
         if self.ego_driver == "control" and self.fidelity != "continuous":
-            raise ValueError(f"the control driver runs the bicycle model: fidelity must be 'continuous', "
+            raise ConfigError(f"the control driver runs the bicycle model: fidelity must be 'continuous', "
                              f"got {self.fidelity!r}")
         if self.background_fidelity not in FIDELITIES:
-            raise ValueError(f"background_fidelity must be one of {FIDELITIES}, got {self.background_fidelity!r}")
+            raise ConfigError(f"background_fidelity must be one of {FIDELITIES}, got {self.background_fidelity!r}")
         if self.reward not in REWARDS:
-            raise ValueError(f"reward must be one of {REWARDS}, got {self.reward!r}")
+            raise ConfigError(f"reward must be one of {REWARDS}, got {self.reward!r}")
         if self.decision_period_s < self.step_length_s - 1e-9:
-            raise ValueError("decision_period_s must be >= step_length_s")
+            raise ConfigError("decision_period_s must be >= step_length_s")
         if abs(self.continuous.executor.dt - self.step_length_s) > 1e-9:
-            raise ValueError("continuous.executor.dt must equal step_length_s (one control period per SUMO step)")
+            raise ConfigError("continuous.executor.dt must equal step_length_s (one control period per SUMO step)")
 
     @property
     def steps_per_decision(self) -> int:
         return max(1, int(round(self.decision_period_s / self.step_length_s)))
+
+
+def env_configs(*, town: str = ScenarioConfig.town, task: str = ScenarioConfig.task,
+                suite: str = ScenarioConfig.suite, episode_index: int | None = ScenarioConfig.episode_index,
+                random_goals: bool = ScenarioConfig.random_goals, density: str | None = ScenarioConfig.density,
+                fidelity: str | None = WorldConfig.fidelity, ego_driver: str = WorldConfig.ego_driver,
+                background_fidelity: str = WorldConfig.background_fidelity, reward: str = WorldConfig.reward,
+                decision_period_s: float = WorldConfig.decision_period_s, observation: str | None = None,
+                road_profile: str | None = None, observation_config: ObservationConfig | None = None,
+                privileged: bool = WorldConfig.privileged) -> tuple[ScenarioConfig, WorldConfig]:
+    """The (scenario, world) configs of the keyword form of every env (defaults: the configs' own).
+
+    Args:
+        town, task, suite, episode_index, random_goals, density: :class:`ScenarioConfig`.
+        fidelity, ego_driver, background_fidelity, reward, decision_period_s, privileged:
+            :class:`WorldConfig` (``fidelity`` is the ego's; None: the default).
+        observation: ``deformed`` or ``vehicle_centric`` M_t (:attr:`ObservationConfig.kind`).
+        road_profile: R_t's entries, ``paper`` or ``metric`` (:attr:`ObservationConfig.road`).
+        observation_config: every grid option at once (``observation`` / ``road_profile``, if given, must agree).
+
+    Raises:
+        ConfigError / UnknownNameError: a bad value, from the configs' own checks (both ValueErrors).
+        TypeError: an unknown keyword (a typo is never swallowed).
+    """
+    if observation_config is None:
+        observation_config = ObservationConfig(**{k: v for k, v in (("kind", observation), ("road", road_profile))
+                                                  if v is not None})
+    elif observation not in (None, observation_config.kind) or road_profile not in (None, observation_config.road):
+        raise ConfigError(f"observation={observation!r} / road_profile={road_profile!r} contradict observation_config "
+                         f"(kind={observation_config.kind!r}, road={observation_config.road!r})")
+    if fidelity is None:
+        fidelity = WorldConfig.fidelity
+    scenario = ScenarioConfig(town=town, task=task, suite=suite, episode_index=episode_index,
+                              random_goals=random_goals, density=density)
+    world = WorldConfig(fidelity=fidelity, ego_driver=ego_driver, background_fidelity=background_fidelity,
+                        reward=reward, decision_period_s=decision_period_s, observation=observation_config,
+                        privileged=privileged)
+    return scenario, world

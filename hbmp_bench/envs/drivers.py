@@ -1,12 +1,20 @@
 """How one behavior moves one SUMO vehicle: a driver per fidelity, one protocol.
 
-A driver executes one behavior at a time for one vehicle; the world steps SUMO around it::
+A driver executes one behavior (or, the control driver, one control vector) at a time for one
+vehicle; the world steps SUMO around it::
 
-    executed = driver.begin(behavior, state, lane, next_edges, into)   # behavior actually run (infeasible -> keep)
+    driver.follow(lane, next_edges, into)                   # at the start: the lane followed (control driver)
+    executed = driver.begin(action, state, lane, next_edges, into)   # action: a feasible behavior, or [accel, steer]
     while driver.before_step(others):                       # others: sim.Actors; False once finished
         sim.step()
         state = driver.observe(sim_state)                   # pose the detectors and M_t use
     r_k = driver.behavior_reward()                          # the paper's lambda(c~_total); 0 in event fidelity
+
+The vehicle decides which behavior runs (an infeasible one runs as keep: :func:`feasible_behaviors`,
+computed once per decision in :meth:`~hbmp_bench.envs.vehicle.ControlledVehicle.begin`); a driver
+runs what it is given and returns the behavior it runs (the planner keeps the lane where the
+followed lane has no neighbour: ``planning.executor.target_path``). ``driver.behaviors`` says which kind of action it takes (True: a behavior
+index; False: a control vector); ``driver.road_extra()`` the entries it appends to R_t.
 
 - :class:`EventDriver` -- the paper's SUMO stage: SUMO's speed and lane-change commands complete the
   behavior within one decision period.
@@ -29,7 +37,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hbmp_bench.envs.observation import followed_path
+from hbmp_bench.envs.observation import LANE_WIDTH_M, followed_path
 from hbmp_bench.maps.roadnet import LANE_CHANGE_CUTOFF_M, RoadNetwork
 from hbmp_bench.planning import (Behavior, BehaviorConfig, BehaviorExecutor, Control, ExecutorConfig, Obstacles,
                                  PlannerConfig, PlanResult, ReferencePaths, VehicleParams, instant_costs,
@@ -96,14 +104,21 @@ class EventDriver:
         self.off_map = False
         """Whether the vehicle's pose could not be put into SUMO (far off its route): never here."""
 
+    behaviors = True
+
     def reset(self, state: VehicleState) -> None:
         self._left = 0
 
-    def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...],
+    def follow(self, lane: str, next_edges: tuple[str, ...], into: tuple[frozenset[str], ...] = ()) -> None:
+        """Nothing to set up: SUMO follows its own lanes."""
+
+    def road_extra(self) -> np.ndarray:
+        return _NO_EXTRA
+
+    def begin(self, executed: int, state: VehicleState, lane: str, next_edges: tuple[str, ...],
               into: tuple[frozenset[str], ...] = ()) -> int:
-        """Start ``behavior``; ``lane`` is the lane followed (SUMO's own lane in event fidelity); SUMO
-        picks the links the vehicle takes (``into`` is not used)."""
-        executed = behavior if feasible_behaviors(self.net, state.lane, state.lane_pos)[behavior] else Behavior.KEEP
+        """Start the (feasible) behavior ``executed``; ``lane`` is the lane followed (SUMO's own lane
+        in event fidelity); SUMO picks the links the vehicle takes (``into`` is not used)."""
         limit = self.net.lane(state.lane).speed
         self.sim.set_speed(self.vehicle_id, reference_speed(executed, state.speed, limit, self.behavior_config))
         if executed in (Behavior.CHANGE_LEFT, Behavior.CHANGE_RIGHT):
@@ -132,6 +147,8 @@ class ModelDriver:
     """What every driver of a bicycle model shares: the model's state, taken from SUMO at the
     start, pushed back into SUMO after every step, and reported to the world in place of SUMO's."""
 
+    behaviors = True
+
     def __init__(self, sim: SumoSim, net: RoadNetwork, vehicle_id: str, config: ContinuousConfig):
         self.sim, self.net, self.vehicle_id, self.config = sim, net, vehicle_id, config
         self.model: ModelState | None = None
@@ -153,6 +170,12 @@ class ModelDriver:
         self.model = ModelState(float(state.xy[0]), float(state.xy[1]), float(state.yaw), max(float(state.speed), 0.0))
         self.last_plan = None
         self.off_map = False
+
+    def follow(self, lane: str, next_edges: tuple[str, ...], into: tuple[frozenset[str], ...] = ()) -> None:
+        """Nothing to set up: each behavior takes its lane when it begins."""
+
+    def road_extra(self) -> np.ndarray:
+        return _NO_EXTRA
 
     def nearby(self, others: Actors) -> Obstacles:
         """The actors within ``config.obstacle_radius_m`` of the model, as planner obstacles."""
@@ -205,16 +228,14 @@ class ContinuousDriver(ModelDriver):
                     self.config.lane_back_m + lane.shape_length)
         return ReferencePaths(left, self.lane_path(lane_id, next_edges, into), right, corridor)
 
-    def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...],
+    def begin(self, executed: int, state: VehicleState, lane: str, next_edges: tuple[str, ...],
               into: tuple[frozenset[str], ...] = ()) -> int:
-        """Start ``behavior`` on the centreline of ``lane`` continued along ``next_edges`` into the
-        route's lanes ``into`` (in a junction: the lane before it, so the path runs through the
-        route's own connection)."""
-        if not feasible_behaviors(self.net, state.lane, state.lane_pos)[behavior]:
-            behavior = Behavior.KEEP
+        """Start the (feasible) behavior ``executed`` on the centreline of ``lane`` continued along
+        ``next_edges`` into the route's lanes ``into`` (in a junction: the lane before it, so the path
+        runs through the route's own connection)."""
         refs = self.reference_paths(lane, tuple(next_edges), tuple(into))
         limit = self.net.lane(lane).speed
-        return int(self.executor.start(behavior, self.model, refs, limit))
+        return int(self.executor.start(executed, self.model, refs, limit))
 
     def before_step(self, others: Actors) -> bool:
         """Plan and track one control period among ``others`` (every other actor now, predicted at
@@ -246,8 +267,9 @@ def obstacles_from(xy: np.ndarray, yaw: np.ndarray, speed: np.ndarray, length: n
 
 class ControlDriver(ModelDriver):
     """No behavior layer: one 0.1 s control step per decision on the bicycle model; SUMO mirrors
-    the pose. :meth:`set_control` gives the agent's action before the world begins the "behavior"
-    (which it runs as keep).
+    the pose. :meth:`begin` takes the agent's ``[a, s]``; the lane followed (for the lane-keeping
+    costs and R_t's two error entries, :meth:`road_extra`) is set at the start (:meth:`follow`)
+    and at every decision.
 
     Args:
         sim / net / vehicle_id / vtype / config: as :class:`ContinuousDriver`.
@@ -263,14 +285,19 @@ class ControlDriver(ModelDriver):
         self._left = 0
         self._costs = (0.0, 0.0)
 
-    def set_control(self, action: np.ndarray) -> None:
-        """``[a, s]`` in [-1, 1]: throttle (a > 0) or brake (a < 0) fraction, steering fraction (left > 0)."""
-        accel, steer = (float(np.clip(a, -1.0, 1.0)) for a in action)
-        self._control = Control(steer=steer, throttle=max(accel, 0.0), brake=max(-accel, 0.0))
+    behaviors = False
 
-    def begin(self, behavior: int, state: VehicleState, lane: str, next_edges: tuple[str, ...],
-              into: tuple[frozenset[str], ...] = ()) -> int:
+    def follow(self, lane: str, next_edges: tuple[str, ...], into: tuple[frozenset[str], ...] = ()) -> None:
+        """Follow the centreline of ``lane`` continued along ``next_edges`` (:meth:`lane_path`)."""
         self.path = self.lane_path(lane, next_edges, into)
+
+    def begin(self, control: np.ndarray, state: VehicleState, lane: str, next_edges: tuple[str, ...],
+              into: tuple[frozenset[str], ...] = ()) -> int:
+        """One control step of ``control`` = ``[a, s]`` (clipped to [-1, 1]): throttle (a > 0) or brake
+        (a < 0) fraction, steering fraction (left > 0)."""
+        accel, steer = (float(np.clip(a, -1.0, 1.0)) for a in control)
+        self._control = Control(steer=steer, throttle=max(accel, 0.0), brake=max(-accel, 0.0))
+        self.follow(lane, next_edges, into)
         self._left = 1
         return Behavior.KEEP
 
@@ -291,6 +318,12 @@ class ControlDriver(ModelDriver):
     def behavior_costs(self) -> dict[str, float]:
         return {"c_dist": self._costs[0], "c_obs": self._costs[1]}
 
+    def road_extra(self) -> np.ndarray:
+        """(2,) float32: the lateral error to the followed lane divided by the lane width and the
+        heading error divided by π/2, both clipped to [-2, 2] (appended to R_t)."""
+        e, th = self.errors()
+        return np.clip([e / LANE_WIDTH_M, th / (np.pi / 2)], -2.0, 2.0).astype(np.float32)
+
     def errors(self) -> tuple[float, float]:
         """Lateral [m] and heading [rad] error of the vehicle to the followed lane."""
         if self.path is None:
@@ -298,6 +331,8 @@ class ControlDriver(ModelDriver):
         _, e, th, _ = self.path.project(self.model.xy, self.model.yaw)
         return float(e), float(th)
 
+
+_NO_EXTRA = np.zeros(0, dtype=np.float32)
 
 FIDELITIES = ("event", "continuous")
 """The drivers of the behavior layer."""

@@ -42,6 +42,7 @@ import numpy as np
 from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.planning.frame import Path
 from hbmp_bench.planning.frame import round_corners as smooth_polyline
+from hbmp_bench.errors import ConfigError
 
 if TYPE_CHECKING:
     from hbmp_bench.sim.sumo import LightAhead
@@ -89,15 +90,15 @@ class ObservationConfig:
 
     def __post_init__(self):
         if self.kind not in ("deformed", "vehicle_centric"):
-            raise ValueError(f"observation kind must be 'deformed' or 'vehicle_centric', got {self.kind!r}")
+            raise ConfigError(f"observation kind must be 'deformed' or 'vehicle_centric', got {self.kind!r}")
         if self.road not in ROAD_PROFILES:
             from hbmp_bench.errors import UnknownNameError
 
             raise UnknownNameError("road profile", self.road, tuple(ROAD_PROFILES))
         if self.rows <= 0 or self.cols <= 0 or self.cell_long_m <= 0 or self.cell_lat_m <= 0:
-            raise ValueError("grid sizes must be > 0")
+            raise ConfigError("grid sizes must be > 0")
         if not 0 <= self.back_m < self.rows * self.cell_long_m:
-            raise ValueError("back_m must lie inside the grid")
+            raise ConfigError("back_m must lie inside the grid")
 
     @property
     def ahead_m(self) -> float:

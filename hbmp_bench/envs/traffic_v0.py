@@ -66,17 +66,19 @@ from __future__ import annotations
 
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
 from pettingzoo.utils.conversions import parallel_to_aec
 
-from hbmp_bench.envs.config import ScenarioConfig, WorldConfig
-from hbmp_bench.envs.observation import ObservationConfig, observation_space
+from hbmp_bench.envs.actions import CONTROL_SPACE, check_action
+from hbmp_bench.envs.config import ScenarioConfig, WorldConfig, env_configs
+from hbmp_bench.envs.ego_view import EgoView
+from hbmp_bench.envs.observation import observation_space
 from hbmp_bench.envs.world import EGO_ID, DrivingWorld
 from hbmp_bench.planning.behaviors import BEHAVIORS
 from hbmp_bench.scenarios import check_salt
+from hbmp_bench.errors import ConfigError
 
 
 def _controlled_count(controlled: str | int, vehicles: int) -> int:
@@ -86,54 +88,76 @@ def _controlled_count(controlled: str | int, vehicles: int) -> int:
         return vehicles
     if isinstance(controlled, (int, np.integer)) and not isinstance(controlled, bool):
         if not 0 <= int(controlled) <= vehicles:
-            raise ValueError(f"controlled must be in [0, {vehicles}] (the episode's background vehicles), "
+            raise ConfigError(f"controlled must be in [0, {vehicles}] (the episode's background vehicles), "
                              f"got {controlled}")
         return int(controlled)
-    raise ValueError(f"controlled must be 'none', 'all' or an int, got {controlled!r}")
+    raise ConfigError(f"controlled must be 'none', 'all' or an int, got {controlled!r}")
+
+
+RENDER_MODES = (None, "rgb_array")
+
+
+def check_render_mode(render_mode: str | None) -> str | None:
+    """``render_mode`` if the envs support it; ValueError naming the valid ones."""
+    if render_mode not in RENDER_MODES:
+        raise ConfigError(f"render_mode {render_mode!r} is not supported; valid: None, 'rgb_array'")
+    return render_mode
+
+
+def build_configs(scenario: ScenarioConfig | None, world: WorldConfig | None,
+                  options: dict[str, Any]) -> tuple[ScenarioConfig, WorldConfig]:
+    """The configs of an env: the given ``scenario`` / ``world``, else those of the keyword form
+    (:func:`~hbmp_bench.envs.config.env_configs`); a config and keywords for it at once is a TypeError."""
+    if options and (scenario is not None or world is not None):
+        raise TypeError(f"give scenario= / world= or their keyword form, not both (got {sorted(options)})")
+    built_scenario, built_world = env_configs(**options)
+    return scenario or built_scenario, world or built_world
 
 
 class TrafficParallelEnv(ParallelEnv):
     """The multi-agent traffic environment; see the module docstring.
 
     Args:
-        town, task, suite, episode_index, random_goals, density: the scenario
-            (:class:`~hbmp_bench.envs.config.ScenarioConfig`).
+        scenario / world: the frozen configs (:class:`~hbmp_bench.envs.config.ScenarioConfig`,
+            :class:`~hbmp_bench.envs.config.WorldConfig`); or, instead, their keyword form
+            (``town``, ``task``, ``suite``, ``episode_index``, ``random_goals``, ``density``,
+            ``fidelity``, ``ego_driver``, ``background_fidelity``, ``reward``, ``decision_period_s``,
+            ``observation``, ``road_profile``, ``observation_config``, ``privileged``: see
+            :func:`~hbmp_bench.envs.config.env_configs`, the one place their defaults live).
+            ``ego_fidelity`` is this env's name for ``fidelity`` (the ego's).
         controlled: ``"none"``, an int N or ``"all"``: background vehicles driven by agents.
-        ego_fidelity / background_fidelity: ``continuous`` or ``event``.
-        ego_driver: ``behavior`` (default) or ``control`` (the flat baseline's acceleration and
-            steering, see :mod:`hbmp_bench.envs.control_env`).
-        reward: ``dense`` (r_k + r_T) or ``sparse`` (r_T).
-        decision_period_s: simulated time per decision in event fidelity [s].
-        observation: ``deformed`` or ``vehicle_centric`` M_t; grid options via ``observation_config``.
-        road_profile: R_t's entries, ``paper`` or ``metric`` (see :mod:`hbmp_bench.envs.observation`).
         render_mode: None or ``rgb_array`` (:meth:`render`: the ego-centred top-down view, with
             every vehicle and pedestrian; :meth:`drain_frames`: one picture per SUMO step).
-        privileged: add the privileged fields to the ego's ``info["scene"]`` (for the rule-based
-            expert; see :class:`~hbmp_bench.envs.config.WorldConfig`).
+
+    An ego with ``ego_driver="control"`` acts with ``Box(-1, 1, (2,))`` = ``[accel, steer]`` and
+    observes R_t with two more entries (see :mod:`hbmp_bench.envs.control_env`).
     """
 
     metadata = {"name": "hbmp_traffic_v0", "render_modes": ["rgb_array"], "render_fps": 10, "is_parallelizable": True}
 
-    def __init__(self, town: str = "Town01", task: str = "NavigationDynamic", suite: str = "corl2017",
-                 episode_index: int | None = None, controlled: str | int = "all",
-                 ego_fidelity: str = "continuous", background_fidelity: str = "event", reward: str = "dense",
-                 density: str | None = None, observation: str = "deformed", render_mode: str | None = None,
-                 random_goals: bool = False, decision_period_s: float = 0.1,
-                 observation_config: ObservationConfig | None = None, ego_driver: str = "behavior",
-                 privileged: bool = False, road_profile: str = "paper"):
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode {render_mode!r} is not supported; valid: None, 'rgb_array'")
-        self.scenario = ScenarioConfig(town=town, task=task, suite=suite, episode_index=episode_index,
-                                       random_goals=random_goals, density=density)
-        obs_cfg = observation_config or ObservationConfig(kind=observation, road=road_profile)
-        self.config = WorldConfig(fidelity=ego_fidelity, ego_driver=ego_driver, background_fidelity=background_fidelity, reward=reward,
-                                  decision_period_s=decision_period_s, observation=obs_cfg, privileged=privileged)
+    def __init__(self, *, scenario: ScenarioConfig | None = None, world: WorldConfig | None = None,
+                 controlled: str | int = "all", render_mode: str | None = None, ego_fidelity: str | None = None,
+                 **options: Any):
+        if ego_fidelity is not None:
+            if "fidelity" in options:
+                raise TypeError("give ego_fidelity or fidelity, not both")
+            options["fidelity"] = ego_fidelity
+        self.render_mode = check_render_mode(render_mode)
+        self.scenario, self.config = build_configs(scenario, world, options)
         self.n_controlled = _controlled_count(controlled, self.scenario.least_vehicles)
         self.possible_agents = [EGO_ID, *(f"bg{k}" for k in range(self.n_controlled))]
         self.agents: list[str] = []
-        self._observation_space = observation_space(obs_cfg)
-        self._action_space = spaces.Discrete(len(BEHAVIORS))
-        self.render_mode = render_mode
+        behavior_obs = observation_space(self.config.observation)
+        if self.config.ego_driver == "control":
+            road = behavior_obs["road"]
+            ego_obs = spaces.Dict(occupancy=behavior_obs["occupancy"],
+                                  road=spaces.Box(-2.0, 2.0, (road.shape[0] + 2,), dtype=np.float32))
+            ego_action = spaces.Box(CONTROL_SPACE.low, CONTROL_SPACE.high, CONTROL_SPACE.shape, CONTROL_SPACE.dtype)
+        else:
+            ego_obs, ego_action = behavior_obs, spaces.Discrete(len(BEHAVIORS))
+        background_action = spaces.Discrete(len(BEHAVIORS))
+        self._observation_spaces = {a: ego_obs if a == EGO_ID else behavior_obs for a in self.possible_agents}
+        self._action_spaces = {a: ego_action if a == EGO_ID else background_action for a in self.possible_agents}
         self._renderer = None
         self._frames: list[np.ndarray] = []
         self._last_behavior = ""
@@ -153,10 +177,11 @@ class TrafficParallelEnv(ParallelEnv):
         return self.scenario.episodes
 
     def observation_space(self, agent: str) -> spaces.Dict:
-        return self._observation_space
+        """The same object for every call (PettingZoo's rule); KeyError for an unknown agent."""
+        return self._observation_spaces[agent]
 
-    def action_space(self, agent: str) -> spaces.Discrete:
-        return self._action_space
+    def action_space(self, agent: str) -> spaces.Space:
+        return self._action_spaces[agent]
 
     @property
     def world(self) -> DrivingWorld:
@@ -182,9 +207,10 @@ class TrafficParallelEnv(ParallelEnv):
             self._capture()
         return obs, infos
 
-    def check_actions(self, actions: dict[str, Any]) -> dict[str, int]:
-        """The actions of the agents that need a decision, as ints; ValueError for bad input (see
-        the module docstring)."""
+    def check_actions(self, actions: dict[str, Any]) -> dict[str, int | np.ndarray]:
+        """The actions of the agents that need a decision, in canonical form
+        (:func:`~hbmp_bench.envs.actions.check_action`): the one place an action is validated.
+        ValueError for bad input (see the module docstring)."""
         stray = sorted(set(actions) - set(self.agents))
         if stray:
             raise ValueError(f"actions for agents that are not live: {stray}; live agents: {self.agents}")
@@ -192,22 +218,16 @@ class TrafficParallelEnv(ParallelEnv):
         missing = [a for a in self.agents if world.needs_decision(a) and actions.get(a) is None]
         if missing:
             raise ValueError(f"agents {missing} need a decision (info['decision_required']) but got no action")
-        clean = {}
-        for agent in self.agents:
-            if world.needs_decision(agent):
-                action = actions[agent]
-                if isinstance(action, (bool, np.bool_)) or not (
-                        isinstance(action, (int, np.integer)) and 0 <= int(action) < len(BEHAVIORS)):
-                    raise ValueError(f"action of {agent} must be an int in [0, {len(BEHAVIORS)}) "
-                                     f"({', '.join(BEHAVIORS)}), got {type(action).__name__} {action!r}")
-                clean[agent] = int(action)
-        return clean
+        single = len(self.possible_agents) == 1
+        return {agent: check_action(self._action_spaces[agent], actions[agent],
+                                    "action" if single else f"action of {agent}")
+                for agent in self.agents if world.needs_decision(agent)}
 
     def step(self, actions: dict[str, Any]):
         if not self.agents:
             raise RuntimeError("call reset() before step() (and again after the episode ends)")
         clean = self.check_actions(actions)
-        if EGO_ID in clean:
+        if EGO_ID in clean and self.config.ego_driver != "control":
             self._last_behavior = BEHAVIORS[clean[EGO_ID]]
         result = self.world.step(clean, on_substep=self._capture if self.render_mode == "rgb_array" else None)
         self.agents = list(self.world.live)
@@ -270,47 +290,41 @@ def env(**kwargs):
 raw_env = TrafficParallelEnv
 
 
-class EgoEnv(gym.Env):
+class EgoEnv(EgoView):
     """Single-ego gymnasium view of :class:`TrafficParallelEnv` with policy-driven background agents.
 
     ``step(action)`` acts for the ego; every background agent that needs a decision gets one from
     its own instance of ``background_policy`` (an agent name or ``module:Class``, see
     :func:`hbmp_bench.agents.load_agent`), and the parallel env is stepped until the ego needs its
-    next decision or its episode ends. Rewards, ends and infos are the ego's. Made by :func:`ego_env`.
+    next decision or its episode ends. Rewards, ends and infos are the ego's. Made by :func:`ego_env`;
+    arguments as :class:`TrafficParallelEnv`.
     """
-
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
 
     def __init__(self, background_policy: str = "expert", **kwargs):
         from hbmp_bench.agents import load_agent
 
         load_agent(background_policy)  # fail fast on a bad name
         self.background_policy = background_policy
-        self.parallel = TrafficParallelEnv(**kwargs)
-        self.render_mode = self.parallel.render_mode
-        self.observation_space = self.parallel.observation_space("ego")
-        self.action_space = self.parallel.action_space("ego")
+        super().__init__(TrafficParallelEnv(**kwargs))
         self._policies: dict[str, Any] = {}
         self._obs: dict[str, Any] = {}
         self._infos: dict[str, Any] = {}
 
-    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+    def _after_reset(self, obs: dict, infos: dict) -> None:
         from hbmp_bench.agents import load_agent
 
-        super().reset(seed=seed)
-        self._obs, self._infos = self.parallel.reset(seed=seed, options=options)
-        self._policies = {a: load_agent(self.background_policy) for a in self.parallel.possible_agents if a != "ego"}
+        self._obs, self._infos = obs, infos
+        self._policies = {a: load_agent(self.background_policy) for a in self.parallel.possible_agents if a != EGO_ID}
         for a, policy in self._policies.items():
             if a in self._infos:
                 policy.reset(self._infos[a])
-        return self._obs["ego"], self._infos["ego"]
 
     def _background_actions(self) -> dict[str, int]:
         return {a: int(self._policies[a].act(self._obs[a], self._infos[a])) for a in self.parallel.agents
-                if a != "ego" and self._infos[a]["decision_required"]}
+                if a != EGO_ID and self._infos[a]["decision_required"]}
 
     def step(self, action):
-        if "ego" not in self.parallel.agents:
+        if EGO_ID not in self.parallel.agents:
             raise RuntimeError("call reset() before step() (and again after the episode ends)")
         actions = {**self._background_actions(), EGO_ID: action}
         total = 0.0
@@ -318,16 +332,10 @@ class EgoEnv(gym.Env):
             obs, rewards, terms, truncs, infos = self.parallel.step(actions)
             self._obs.update(obs)
             self._infos.update(infos)
-            total += float(rewards.get("ego", 0.0))
-            if terms.get("ego") or truncs.get("ego") or infos["ego"]["decision_required"]:
-                return obs["ego"], total, bool(terms.get("ego")), bool(truncs.get("ego")), infos["ego"]
+            total += float(rewards.get(EGO_ID, 0.0))
+            if terms.get(EGO_ID) or truncs.get(EGO_ID) or infos[EGO_ID]["decision_required"]:
+                return obs[EGO_ID], total, bool(terms.get(EGO_ID)), bool(truncs.get(EGO_ID)), infos[EGO_ID]
             actions = self._background_actions()
-
-    def render(self):
-        return self.parallel.render()
-
-    def close(self):
-        self.parallel.close()
 
 
 def ego_env(background_policy: str = "expert", **kwargs) -> EgoEnv:

@@ -15,7 +15,7 @@ infraction detector, its observation (M_t, R_t and the scene) and its reward. It
 
 The world steps SUMO around its vehicles (:class:`hbmp_bench.envs.world.DrivingWorld`)::
 
-    vehicle.begin(behavior)                  # keep the route, start the behavior
+    vehicle.begin(action)                    # keep the route, start the behavior (or control step)
     while vehicle.wants_step():              # plan one control period; False once it has finished
         sim.step()
         events = vehicle.after_sim_step(snapshot)   # pose, detectors, end of its episode
@@ -132,7 +132,10 @@ class ControlledVehicle:
         self.behavior_start_s = shared.sim.time
         self.scene: Scene | None = None
         """The typed scene of the last observation (``info["scene"]`` is its dict)."""
+        self.control: list[float] | None = None
+        """The last control vector ``[a, s]`` (a driver without behaviors), as given."""
         route.attach(self)
+        driver.follow(route.begin_lane(), self.next_edges(), self.next_lanes())
 
     @property
     def front(self) -> np.ndarray:
@@ -152,11 +155,18 @@ class ControlledVehicle:
         return self.route.lane_sets()[k + 1: k + 1 + count]
 
     # ------------------------------------------------------------------ step
-    def begin(self, behavior: int) -> None:
-        """Start ``behavior`` (0..4)."""
+    def begin(self, action) -> None:
+        """Start the behavior ``action`` (0..4; an infeasible lane change runs as keep:
+        :func:`~hbmp_bench.envs.drivers.feasible_behaviors` at the front bumper's lane position),
+        or, for a driver without behaviors, one control step of ``action`` = ``[a, s]``."""
         self.route.keep()
-        self.behavior = Behavior(behavior)
-        self.executed = Behavior(self.driver.begin(behavior, self.state, self.route.begin_lane(), self.next_edges(),
+        if self.driver.behaviors:
+            self.behavior = Behavior(action)
+            feasible = feasible_behaviors(self.shared.net, self.state.lane, self.state.lane_pos)[action]
+            command = int(self.behavior if feasible else Behavior.KEEP)
+        else:
+            self.control, command = [float(a) for a in action], action
+        self.executed = Behavior(self.driver.begin(command, self.state, self.route.begin_lane(), self.next_edges(),
                                                    self.next_lanes()))
         self.behavior_start_s = self.shared.sim.time
         self.decisions += 1
@@ -214,8 +224,11 @@ class ControlledVehicle:
         r_terminal = events_reward(events, timed_out=self.end_reason in GOAL_UNREACHABLE)
         r_k = self.driver.behavior_reward() if behavior_ended else 0.0
         if behavior_ended:
-            info["behavior"] = BEHAVIORS[self.behavior]
-            info["behavior_executed"] = BEHAVIORS[self.executed]
+            if self.driver.behaviors:
+                info["behavior"] = BEHAVIORS[self.behavior]
+                info["behavior_executed"] = BEHAVIORS[self.executed]
+            else:
+                info["control"] = self.control
             info["duration_s"] = round(self.shared.sim.time - self.behavior_start_s, 6)
             info["planner_costs"] = self.driver.behavior_costs()
         info["reward_components"] = {"r_k": r_k, "r_T": r_terminal}
@@ -226,10 +239,13 @@ class ControlledVehicle:
         s, a = self.state, self.actors
         road, self.scene = self.route.road_profile()
         road = road_vector(self.shared.observer.config, road, self.scene.stop_distance_m, self.scene.speed_mps)
+        extra = self.driver.road_extra()
+        if extra.size:
+            road = np.concatenate([road.astype(np.float32), extra])
         occupancy = self.shared.observer.occupancy(s.xy, s.yaw, self.followed_lane or s.lane, self.next_edges(),
                                                    a.xy, a.yaw, a.length, a.width, self.next_lanes())
         info = {
-            "action_mask": self.action_mask(),
+            **({"action_mask": self.action_mask()} if self.driver.behaviors else {}),
             "events": {kind: getattr(events, kind) for kind in EVENT_KINDS},
             "infractions": dict(self.detector.totals),
             "time_s": self.shared.sim.time,

@@ -204,7 +204,7 @@ class DrivingWorld:
         before the call; finished vehicles leave ``live``."""
         for name in self.live:
             if self.needs_decision(name):
-                self.vehicles[name].begin(int(actions[name]))
+                self.vehicles[name].begin(actions[name])
                 self._running.add(name)
         events = {name: StepEvents() for name in self.live}
         ended: set[str] = set()

@@ -27,9 +27,9 @@ from multiprocessing import reduction
 from multiprocessing.connection import Connection
 from typing import Any
 
-import numpy as np
 
 from hbmp_bench import rollout
+from hbmp_bench.envs.actions import check_action
 from hbmp_bench.plugins import resolve
 from hbmp_bench.evaluation import channel
 from hbmp_bench.evaluation.sandbox import protect_process
@@ -68,17 +68,6 @@ def build_env(task: EpisodeTask, factory: str | None, env_kwargs: dict | None = 
     else:
         make = resolve(factory, "env factory")
     return make(town=task.town, task=task.task, suite=task.suite, fidelity=task.fidelity, **(env_kwargs or {}))
-
-
-def _valid_action(space, action) -> bool:
-    """``action`` (int or tuple of floats from the agent process) belongs to ``space``."""
-    if isinstance(action, int):
-        start = int(getattr(space, "start", 0))
-        return hasattr(space, "n") and start <= action < start + int(space.n)
-    if isinstance(action, tuple) and hasattr(space, "shape") and not hasattr(space, "n"):
-        array = np.asarray(action, dtype=space.dtype)
-        return array.shape == space.shape and bool(space.contains(array))
-    return False
 
 
 def blank_record(task: EpisodeTask, end_reason: str, error: str) -> EpisodeRecord:
@@ -256,9 +245,13 @@ def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits
     beat(force=True)
 
     def check(action, decisions: int):
-        if not _valid_action(env.action_space, action):
-            raise ValueError(f"invalid action {action!r} at decision {decisions}: want an element of {env.action_space}")
-        return np.asarray(action, dtype=env.action_space.dtype) if isinstance(action, tuple) else action
+        """The agent's action (an int, or a tuple of floats off the channel) by the env door's rule,
+        strictly: an element of the action space, or the agent's error."""
+        try:
+            return check_action(env.action_space, action, strict=True)
+        except ValueError as exc:
+            raise ValueError(f"invalid action {action!r} at decision {decisions}: want an element of "
+                             f"{env.action_space}") from exc
 
     hooks = rollout.EpisodeHooks(on_reset=lambda obs, info: beat(force=True), check_action=check,
                                  on_step=lambda *step: beat())
