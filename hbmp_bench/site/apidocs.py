@@ -16,14 +16,26 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1]
 API_ROOMS: dict[str, str] = {
     "envs": "Environments: the PettingZoo traffic env, the gymnasium behavior and control envs, observations.",
     "agents": "The agent protocol and registry, the expert, the simple and the learned agents.",
+    "policies": "The networks, their action distributions and checkpoint loading (the package's own classes only).",
     "evaluation": "Suite runs, the sandboxed agent process, leaderboards, audits.",
     "training": "DAgger, PPO on rsl-rl, the networks, the training session.",
     "metrics": "Detectors, episode records, summaries and reports.",
     "scenarios": "Tasks, suites and their deterministic episode lists.",
     "planning": "The behavior-conditioned sampling motion planner (pure numpy).",
     "maps": "The towns, their statistics and the import of OpenDRIVE and SUMO nets.",
+    "sim": "The one door to SUMO: start and close, the world snapshot, the ego's pose.",
+    "render": "The headless top-down renderer, GIF recording and the planner figure.",
 }
-"""Rooms documented in the API reference (page ``api/<room>.md``) and the line heading each page."""
+"""Rooms documented in the API reference (page ``api/<room>.md``) and the line heading each page; a room
+the package does not have (yet) is left out (:func:`documented_rooms`)."""
+
+NAV_TITLE = "API reference"
+"""The ``mkdocs.yml`` nav section whose pages :func:`on_config` fills in."""
+
+
+def documented_rooms() -> list[str]:
+    """The rooms of :data:`API_ROOMS` that are packages of this checkout."""
+    return [room for room in API_ROOMS if (PACKAGE_DIR / room / "__init__.py").is_file()]
 
 
 def room_modules(room: str) -> list[str]:
@@ -64,11 +76,22 @@ def api_page(room: str) -> str:
 
 def api_pages() -> dict[str, str]:
     """``{"api/<room>.md": markdown}`` for every room of :data:`API_ROOMS`, and ``api/index.md``."""
-    pages = {f"api/{room}.md": api_page(room) for room in API_ROOMS}
+    rooms = documented_rooms()
+    pages = {f"api/{room}.md": api_page(room) for room in rooms}
     lines = ["# API reference\n", "Generated from the docstrings of the package's modules, one page per room:\n"]
-    lines += [f"- [`hbmp_bench.{room}`]({room}.md): {text}" for room, text in API_ROOMS.items()]
+    lines += [f"- [`hbmp_bench.{room}`]({room}.md): {API_ROOMS[room]}" for room in rooms]
     pages["api/index.md"] = "\n".join(lines) + "\n"
     return pages
+
+
+def on_config(config):
+    """mkdocs hook: the nav's :data:`NAV_TITLE` section lists the generated pages, one per room."""
+    section = [{"Overview": "api/index.md"}, *({f"hbmp_bench.{room}": f"api/{room}.md"} for room in documented_rooms())]
+    for item in config["nav"] or []:
+        if isinstance(item, dict) and NAV_TITLE in item:
+            item[NAV_TITLE] = section
+            return config
+    raise ValueError(f"mkdocs.yml's nav has no {NAV_TITLE!r} section for the generated API pages")
 
 
 def on_files(files, config):

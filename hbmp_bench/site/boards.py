@@ -85,7 +85,8 @@ class BoardData:
 
     board: Board
     entries: list[dict]
-    """Results documents as ``load_entries`` returns them (``_file``: the file's name), ranked first."""
+    """Results documents as ``load_entries`` returns them (``_file``: the file's name): complete ones first, then by
+    fidelity and success."""
     labels: dict[str, str]
     """Entry file name -> its result-set label in the report views (``hbmp``, ``expert [event]``)."""
     paired: pd.DataFrame
@@ -104,9 +105,7 @@ def load_board(board: Board) -> BoardData:
     from hbmp_bench.metrics import report
     from hbmp_bench.scenarios import get_suite
 
-    entries = load_entries(board.board_dir, board.suite)
-    entries.sort(key=lambda d: (not d["complete"], d["fidelity"], -d["summary"].get("success_pct", 0.0),
-                                -d["summary"].get("mean_driving_score", 0.0), d["agent"]))
+    entries = load_entries(board.board_dir, board.suite)  # in file-name order, as ``report`` reads a folder
     frames, labels = [], {}
     for doc in entries:
         df = pd.DataFrame([r.to_dict() for r in results_records(doc)])
@@ -116,6 +115,8 @@ def load_board(board: Board) -> BoardData:
     for doc in entries:
         labels[doc["_file"]] = str(df.loc[df["source"] == doc["_file"], "result_set"].iloc[0])
     views = report.build_report(df)
+    entries.sort(key=lambda d: (not d["complete"], d["fidelity"], -d["summary"].get("success_pct", 0.0),
+                                -d["summary"].get("mean_driving_score", 0.0), d["agent"]))
     readme = board.folder / "README.md"
     return BoardData(board=board, entries=entries, labels=labels, paired=views["paired"],
                      km_between=views["km_between"], breakdown=breakdown(df),
@@ -143,10 +144,10 @@ def breakdown(df: pd.DataFrame) -> pd.DataFrame:
             key = (row["result_set"], row["town"])
             driven = float(km.get(key, 0.0))
             n_events = int(events.get(key, 0))
-            rows.append({**row, "source": source[row["result_set"]], "task": task, "km_driven": round(driven, 3),
+            rows.append({**row, "source": source[row["result_set"]], "task": task, "km_driven": driven,
                          "infraction_events": n_events,
-                         "success_pct": round(100.0 * row["success"] / row["episodes"], 1) if row["episodes"] else math.nan,
-                         "infractions_per_km": round(n_events / driven, 3) if driven > 0 else 0.0})
+                         "success_pct": 100.0 * row["success"] / row["episodes"] if row["episodes"] else math.nan,
+                         "infractions_per_km": n_events / driven if driven > 0 else 0.0})
     return pd.DataFrame(rows)
 
 

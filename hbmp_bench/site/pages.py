@@ -486,16 +486,24 @@ def index_page(boards: Sequence[BoardData], agents: Sequence[str]) -> str:
     rows = []
     for data in boards:
         complete = [d for d in data.entries if d["complete"]]
-        best = max(complete, key=lambda d: (d["summary"].get("success_pct", 0.0),
-                                            d["summary"].get("mean_driving_score", 0.0)), default=None)
+        rank = lambda d: (d["summary"].get("success_pct", 0.0), d["summary"].get("mean_driving_score", 0.0))  # noqa: E731
+        best = max(complete, key=rank, default=None)
+        fair = max((d for d in complete if not d["privileged"]), key=rank, default=None)
         rows.append(([
             txt(data.board.title, "board", f'<a href="{board_file(data)}">{esc(data.board.title)}</a>'),
             txt(data.board.suite, "suite"), txt(" ".join(data.towns), "towns"), num(len(data.entries), "entries"),
-            num(len(complete), "complete"), txt(best["agent"] if best else "–", "best"),
+            num(len(complete), "complete"),
+            txt(f"{best['agent']} ({best['fidelity']})" if best else "–", "best"),
             num(best["summary"]["success_pct"] if best else None, "best_success_pct"),
+            txt(f"{fair['agent']} ({fair['fidelity']})" if fair else "–", "best_unprivileged"),
+            num(fair["summary"]["success_pct"] if fair else None, "best_unprivileged_success_pct"),
         ], {"board": data.board.slug}))
     parts += ["<h2>Boards</h2>\n", table("boards", ["board", "suite", "towns", "entries", "complete entries",
-                                                   "best complete entry", "its success %"], rows)]
+                                                   "best complete entry", "success %",
+                                                   "best without privileged state", "success %"], rows)]
+    parts.append('<p class="note">Privileged entries (the rule-based expert) read the simulator\'s scene: a '
+                 'reference, not comparable with agents that see M_t and R_t only. Partial runs (subsets of a '
+                 'suite) are not ranked.</p>\n')
     parts.append("<h2>Agents</h2>\n<ul>" + "".join(f'<li><a href="{agent_file(a)}">{esc(a)}</a></li>' for a in agents)
                  + "</ul>\n")
     parts.append('<p><a href="paper.html">Paper reproduction</a>: the paper\'s claims, Tab. I and Fig. town15 '
