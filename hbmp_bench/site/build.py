@@ -17,6 +17,7 @@ Pages (all in ``DIR``, linked by relative paths, so the site opens from the file
 from __future__ import annotations
 
 import shutil
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -108,24 +109,41 @@ def build_site(out: str | Path, boards_root: str | Path = "leaderboards", repo_r
     return SiteBuild(out=out, pages=tuple(written), total_bytes=total)
 
 
+GIF_EVERY = 5
+"""Frames kept by the failure GIFs: every 5th 0.1 s step (2 per simulated second), played at :data:`GIF_FPS`."""
+
+GIF_FPS = 4.0
+
+GIF_MAX_DECISIONS = 150
+"""Decisions recorded at most per GIF (a long timeout's GIF ends there)."""
+
+
 def _record_failures(agent: str, boards: list[BoardData], out: Path, count: int) -> dict:
-    """Record the first ``count`` failed episodes of ``agent``'s built-in-town entries as small GIFs
-    (every 10th 0.1 s frame, at most 150 decisions); returns the page's key -> GIF path."""
+    """Record ``agent``'s ``count`` shortest failed episodes on built-in towns (of the failures the agent
+    page lists) as small GIFs with ``hbmp-bench record``'s function; returns the page's key ->
+    ``(GIF path, the replay's record)``, so the page can say whether the replay ended as the entry's
+    episode did."""
     from hbmp_bench.envs.recording import record_episode
     from hbmp_bench.maps import TOWNS
 
+    listed = [(data, doc, e) for data in boards for doc in data.entries if doc["agent"] == agent
+              for e in pages._failures(doc)[:pages.FAILURES_PER_ENTRY] if e["town"] in TOWNS]
+    listed.sort(key=lambda item: (float(item[2].get("duration_s", 0.0)), item[0].board.slug, item[1]["_file"]))
     recorded = {}
-    for data in boards:
-        for doc in data.entries:
-            if doc["agent"] != agent or len(recorded) >= count:
-                continue
-            for e in pages._failures(doc)[:pages.FAILURES_PER_ENTRY]:
-                if len(recorded) >= count or e["town"] not in TOWNS:
-                    continue
-                rel = f"img/{pages.slug(agent)}-{data.board.slug}-{e['town']}-{e['task']}-{e['episode']}.gif"
-                (out / "img").mkdir(exist_ok=True)
-                record_episode(f"hbmp_bench/{e['town']}-{e['task']}-v0", agent, str(out / rel),
-                               episode_index=int(e["episode"]), suite=doc["suite"], fidelity=doc["fidelity"],
-                               every=10, max_decisions=150, fps=5)
-                recorded[(data.board.slug, doc["_file"], int(e["episode"]), e["town"], e["task"])] = rel
+    for data, doc, e in listed[:count]:
+        rel = f"img/{pages.slug(agent)}-{data.board.slug}-{doc['fidelity']}-{e['town']}-{e['task']}-{e['episode']}.gif"
+        (out / "img").mkdir(exist_ok=True)
+        key = (data.board.slug, doc["_file"], int(e["episode"]), e["town"], e["task"])
+        try:
+            replay = record_episode(f"hbmp_bench/{e['town']}-{e['task']}-v0", agent, str(out / rel),
+                                    episode_index=int(e["episode"]), suite=doc["suite"], fidelity=doc["fidelity"],
+                                    every=GIF_EVERY, max_decisions=GIF_MAX_DECISIONS, fps=GIF_FPS)
+        except Exception as exc:  # the page says so; one agent the recorder cannot drive spoils no other page
+            (out / rel).unlink(missing_ok=True)
+            error = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+            print(f"hbmp-bench site: could not record {agent} {key[1]} {e['town']} {e['task']} {e['episode']}: "
+                  f"{error}", file=sys.stderr)
+            recorded[key] = (None, {"error": error})
+            continue
+        recorded[key] = (rel, replay)
     return recorded

@@ -343,8 +343,18 @@ def replay_command(doc: dict, episode: dict) -> str:
     return shlex.join(argv)
 
 
+def replay_note(replay: dict, episode: dict) -> str:
+    """How a GIF's replay ended against the entry's episode (deterministic given the seed: they agree
+    unless the GIF stopped at its decision cap, or the code or float platform differ)."""
+    said = f"replayed: {replay.get('end_reason')} at {fmt(float(replay.get('duration_s', 0.0)))} s"
+    if replay.get("end_reason") == episode.get("end_reason") and math.isclose(
+            float(replay.get("duration_s", -1.0)), float(episode.get("duration_s", -2.0))):
+        return said + ", as the entry recorded"
+    return said + f"; the entry recorded {episode.get('end_reason')} at {fmt(float(episode.get('duration_s', 0.0)))} s"
+
+
 def agent_page(agent: str, card: AgentCard | None, curves: str | None, boards: Sequence[BoardData],
-               agents: Sequence[str], gifs: dict[tuple[str, str, int], str] | None = None) -> str:
+               agents: Sequence[str], gifs: dict[tuple, tuple[str, dict]] | None = None) -> str:
     labels = _task_labels()
     parts = [f"<h1>Agent: {esc(agent)}</h1>\n"]
     if card is not None:
@@ -378,9 +388,14 @@ def agent_page(agent: str, card: AgentCard | None, curves: str | None, boards: S
                 gif = (gifs or {}).get(key)
                 command = replay_command(doc, e)
                 cell = f"<code>{esc(command)}</code>"
-                if gif:
-                    cell += f'<br><img class="figure" src="{esc(gif)}" alt="replay of {esc(e["town"])} ' \
-                            f'{esc(e["task"])} {e["episode"]}" loading="lazy">'
+                if gif and gif[0] is None:
+                    cell += (f'<br><span class="note bad" data-field="replay">not recorded: '
+                             f'{esc(gif[1]["error"])}</span>')
+                elif gif:
+                    path, replay = gif
+                    cell += (f'<br><img class="figure" src="{esc(path)}" alt="replay of {esc(e["town"])} '
+                             f'{esc(e["task"])} {e["episode"]}"><br><span class="note" data-field="replay">'
+                             f'{esc(replay_note(replay, e))}</span>')
                 failure_rows.append(([
                     txt(data.board.title, "board"), txt(doc["fidelity"]), txt(e["town"], "town"),
                     txt(labels.get(e["task"], e["task"]), "task"), num(int(e["episode"]), "episode"),

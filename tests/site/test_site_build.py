@@ -80,3 +80,23 @@ def test_a_results_file_whose_figures_were_edited_is_never_shown(tmp_path):
 def test_negative_gifs_are_refused(tmp_path):
     with pytest.raises(UserError, match="--gifs must be >= 0"):
         build_site(tmp_path / "site", BOARDS, gifs=-1)
+
+
+@pytest.mark.slow
+def test_gifs_replay_the_entrys_shortest_failure(tmp_path):
+    """``--gifs 1``: the agent page shows a GIF of its shortest failed episode, recorded by ``record``'s
+    function from the episode's seed, and says the replay ended as the results file recorded."""
+    boards = tmp_path / "boards" / "hbmp"
+    boards.mkdir(parents=True)
+    shutil.copy(BOARDS / "hbmp" / "hbmp.continuous.json", boards)
+    doc = json.loads((boards / "hbmp.continuous.json").read_text(encoding="utf-8"))
+    shortest = min((e for e in doc["episodes"] if not e["success"]), key=lambda e: e["duration_s"])
+    site = tmp_path / "site"
+    assert main(["site", "--out", str(site), "--boards", str(tmp_path / "boards"), "--gifs", "1"]) == 0
+    gifs = list((site / "img").glob("*.gif"))
+    assert [g.name for g in gifs] == [f"hbmp-hbmp-continuous-{shortest['town']}-{shortest['task']}-"
+                                      f"{shortest['episode']}.gif"]
+    assert 10_000 < gifs[0].stat().st_size < 2_000_000
+    page = (site / "agent-hbmp.html").read_text(encoding="utf-8")
+    assert f'src="img/{gifs[0].name}"' in page
+    assert f"replayed: {shortest['end_reason']} at {shortest['duration_s']:.1f} s, as the entry recorded" in page
