@@ -231,7 +231,7 @@ def test_is_user_error():
 
 
 def test_train_resume_hint_follows_what_the_interrupt_left(tmp_path):
-    from hbmp_bench.training.checkpoints import save_checkpoint
+    from hbmp_bench.policies.checkpoints import save_checkpoint
     from hbmp_bench.training.commands import _resume_hint
 
     args = cli.build_parser().parse_args(["train", "il", "--episodes", "10", "--save-every", "5", "--out",

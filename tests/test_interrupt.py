@@ -17,7 +17,7 @@ import pytest
 from hbmp_bench.cli import main
 from hbmp_bench.evaluation import records_path
 from hbmp_bench.metrics.records import read_records
-from hbmp_bench.training.checkpoints import load_checkpoint
+from hbmp_bench.policies.checkpoints import load_checkpoint
 
 pytestmark = pytest.mark.slow
 

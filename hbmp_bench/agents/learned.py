@@ -80,7 +80,7 @@ class LearnedAgent:
     def __init__(self, checkpoint: str, name: str | None = None, device: str = "cpu"):
         import torch
 
-        from hbmp_bench.training.checkpoints import build_actor, load_checkpoint
+        from hbmp_bench.policies.checkpoints import build_actor, load_checkpoint
 
         ckpt = load_checkpoint(checkpoint)
         self.checkpoint = checkpoint

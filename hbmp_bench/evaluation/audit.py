@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from hbmp_bench.errors import UserError
-from hbmp_bench.evaluation.leaderboard import EPISODE_COLUMNS, check_results
 from hbmp_bench.evaluation.results_check import commitment, verify_results
+from hbmp_bench.metrics.results_file import EPISODE_COLUMNS, check_results
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, is_privileged, with_agent_env
 from hbmp_bench.metrics.records import SIM_ERROR
 
@@ -89,7 +89,7 @@ class AuditResult:
 
 
 def compare(recorded: dict, replayed: dict) -> dict[str, tuple[object, object]]:
-    """The fields of :data:`~hbmp_bench.evaluation.leaderboard.EPISODE_COLUMNS` whose values differ
+    """The fields of :data:`~hbmp_bench.metrics.results_file.EPISODE_COLUMNS` whose values differ
     (numbers in :data:`FLOAT_FIELDS` compared as the records round them)."""
     out = {}
     for name in EPISODE_COLUMNS:

@@ -42,35 +42,18 @@ from hbmp_bench.errors import UserError
 from hbmp_bench.evaluation.evaluate import code_fingerprint, evaluate
 from hbmp_bench.evaluation.integrity import BoardSnapshot
 from hbmp_bench.evaluation.provenance import git_commit, library_versions, machine_description, utc_now
-from hbmp_bench.evaluation.results_check import ForgedResultsError, check_name, contained, name_problems, verify_results
+from hbmp_bench.evaluation.results_check import contained, verify_results
 from hbmp_bench.evaluation.tasks import RunnerLimits, agent_slug, suite_tasks
-from hbmp_bench.metrics import report
-from hbmp_bench.metrics.records import DRIVING_SCORE_DEFINITION, SIM_ERROR, EpisodeRecord
-from hbmp_bench.metrics.summary import summarize
+from hbmp_bench.metrics.records import DRIVING_SCORE_DEFINITION, EpisodeRecord
+from hbmp_bench.metrics.report import scores
+from hbmp_bench.metrics.results_file import (  # noqa: F401  (StaleResultsError, results_records: the board's names too)
+    EPISODE_COLUMNS, RESULTS_FORMAT, ForgedResultsError, StaleResultsError, check_name, check_results, results_records)
 from hbmp_bench.scenarios import TASK_LABELS, TASKS, get_suite
-from hbmp_bench.vocabulary import INFRACTION_KINDS
-
-RESULTS_FORMAT = 3
-"""Version of the results file layout (2: the ``privileged`` flag; 3: the ``salted`` flag and the
-salt's commitment). A format-1 file reads as privileged: before the flag every agent was handed
-the privileged scene fields; format 1 and 2 files read as unsalted (salted mode came with 3)."""
-
-EPISODE_COLUMNS = (
-    "town", "task", "episode", "seed", "success", "route_completion", "driving_score", *INFRACTION_KINDS, "timeout",
-    "duration_s",
-    "distance_m", "route_length_m", "decisions", "end_reason", "error",
-)
-"""Per-episode fields kept in a results file."""
-
-
-class StaleResultsError(UserError):
-    """A results file made for another definition of its suite."""
-
 
 def entry_path(board_dir: str | os.PathLike, suite: str, agent: str, subset: bool, fidelity: str) -> Path:
     """``<board>/<suite>/<agent slug>.<fidelity>.json`` (``.subset.json`` for partial runs): one
     entry per agent and fidelity, ranked in that fidelity's table. ``suite`` and ``fidelity`` must
-    be names (``results_check.NAME_PATTERN``: no ``/``, no ``..``) and the path must resolve inside
+    be names (``metrics.results_file.NAME_PATTERN``: no ``/``, no ``..``) and the path must resolve inside
     ``<board>/<suite>``; ValueError otherwise."""
     check_name("suite", suite)
     check_name("fidelity", fidelity)
@@ -146,90 +129,6 @@ def results_document(
     }
 
 
-def scores(suite: str, records: Sequence[EpisodeRecord], *, towns: Sequence[str], tasks: Sequence[str],
-           episodes: Sequence[int], agent: str = "", aggregates: bool = True) -> dict:
-    """What a results file derives from its episode records and its selection of ``suite``:
-    ``complete``, ``subset``, ``selection``, ``expected_episodes``, ``sim_errors``, ``summary`` and
-    ``aggregates`` (the report views; only ``success_pct_by_task`` when ``aggregates`` is False,
-    which is what the board's tables show). One function for ``submit``, ``add`` and ``render``,
-    so a file's claims are checked by recomputing them (``results_check``)."""
-    spec = get_suite(suite)
-    full = (set(towns) == set(spec.towns) and set(tasks) == set(spec.tasks)
-            and list(episodes) == list(range(spec.episodes_per_task)))
-    expected = len(towns) * len(tasks) * len(episodes)
-    sim_errors = sum(r.end_reason == SIM_ERROR for r in records)
-    frame = report.records_frame(records, label=agent) if records else None
-    views = {}
-    if frame is not None:
-        if aggregates:
-            views = {name: report.view_rows(view) for name, view in report.build_report(frame).views.items()}
-        per_task = report.scored(frame).groupby("task")["success"].mean() * 100.0
-        views["success_pct_by_task"] = {t: round(float(per_task[t]), 1) for t in TASKS if t in per_task.index}
-    scored_records = [r for r in records if r.end_reason not in report.EXCLUDED]
-    summary = summarize(scored_records)
-    km = float(sum(r.distance_m for r in scored_records)) / 1000.0
-    events = sum(r.collisions + r.wrong_lane + r.off_road + r.red_light for r in scored_records)
-    summary["success_pct"] = round(100.0 * summary["success_rate"], 2)
-    summary["km_per_infraction"] = round(km / events, 3) if events else None
-    return {
-        "complete": full and len(records) == expected and sim_errors == 0,
-        "subset": not full,
-        "selection": {"towns": list(towns), "tasks": list(tasks), "episodes": list(episodes)},
-        "expected_episodes": expected,
-        "sim_errors": sim_errors,
-        "summary": summary,
-        "aggregates": views,
-    }
-
-
-def check_results(doc: dict, source: str = "results") -> dict:
-    """``doc`` if it is a results file of the installed suite whose ``complete`` and ``sim_errors``
-    agree with its episodes; else a clear error. A format-1 file is read as format 3 with
-    ``privileged`` true, a format 1 or 2 file as unsalted (see :data:`RESULTS_FORMAT`). Everything
-    else a file claims is checked by ``results_check.verify_results``."""
-    if isinstance(doc, dict) and doc.get("format") == 1 and "privileged" not in doc:
-        doc = {**doc, "format": 2, "privileged": True}
-    if isinstance(doc, dict) and doc.get("format") == 2:
-        doc = {**doc, "format": RESULTS_FORMAT, "salted": False}
-    if not isinstance(doc, dict) or doc.get("format") != RESULTS_FORMAT or not isinstance(doc.get("suite"), str):
-        raise UserError(f"{source} is not a leaderboard results file (format {RESULTS_FORMAT})")
-    if not isinstance(doc.get("provenance"), dict):
-        raise UserError(f"{source} has no provenance")
-    if not isinstance(doc.get("privileged"), bool):
-        raise UserError(f"{source} has no privileged flag (true or false)")
-    episodes = doc.get("episodes")
-    if not isinstance(episodes, list) or not all(isinstance(e, dict) for e in episodes):
-        raise UserError(f"{source} has no list of episodes")
-    sim_errors = sum(e.get("end_reason") == SIM_ERROR for e in episodes)
-    if doc.get("sim_errors") != sim_errors:
-        raise UserError(f"{source} says sim_errors={doc.get('sim_errors')!r} but its episodes hold {sim_errors}")
-    if doc.get("complete") and (sim_errors or doc.get("subset") or len(episodes) != doc.get("expected_episodes")):
-        raise UserError(f"{source} says complete, but it has {len(episodes)} of {doc.get('expected_episodes')} "
-                         f"episodes, {sim_errors} sim errors, subset={doc.get('subset')!r}")
-    name_issues = name_problems(doc)
-    if name_issues:
-        raise ForgedResultsError(source, name_issues)
-    current = get_suite(doc["suite"]).definition_hash()
-    if doc.get("suite_hash") != current:
-        raise StaleResultsError(
-            f"{source} was made for suite {doc['suite']!r} with definition hash {doc.get('suite_hash')!r}, but the "
-            f"installed {doc['suite']!r} hashes to {current!r}: its episodes are not the current suite's. Rerun the "
-            f"submission (hbmp-bench leaderboard submit --suite {doc['suite']} --agent {doc.get('agent')}) or remove the file."
-        )
-    return doc
-
-
-def results_records(path: str | os.PathLike | dict) -> list[EpisodeRecord]:
-    """The episode records of a results file (checked, see :func:`check_results`; or of a results
-    document already read), as the evaluation wrote them: so ``hbmp-bench report`` reads
-    leaderboard entries like records files."""
-    doc = path if isinstance(path, dict) else check_results(json.loads(Path(path).read_text(encoding="utf-8")),
-                                                             str(path))
-    shared = {"suite": doc["suite"], "agent": doc["agent"], "fidelity": doc["fidelity"],
-              "package_version": doc.get("provenance", {}).get("package_version", "")}
-    return [EpisodeRecord(**{**episode, **shared}) for episode in doc["episodes"]]
-
-
 def write_json(path: Path, doc: dict) -> Path:
     """Write a results document to ``path`` (one line per episode, so diffs stay readable) through a
     temporary file and a rename."""
@@ -276,8 +175,10 @@ def _partial_key(doc: dict) -> tuple:
 
 def _suite_episodes(suite: str) -> int:
     """Episodes of the whole suite (every town, task and episode)."""
+    from hbmp_bench.scenarios import selection_size
+
     spec = get_suite(suite)
-    return len(spec.towns) * len(spec.tasks) * spec.episodes_per_task
+    return selection_size(spec.name, spec.towns, spec.tasks, range(spec.episodes_per_task))
 
 
 def _row(doc: dict, rank: str) -> list[str]:

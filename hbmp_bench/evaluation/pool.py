@@ -58,7 +58,7 @@ PRELOAD = ("hbmp_bench.evaluation.forkserver_guard", "hbmp_bench.evaluation.env_
 The heavy ones an episode needs are named on purpose, as the package imports them where they are
 used: libsumo (with ``behavior_env``), sumolib (the road network) and numba (the planner's
 roll-out)."""
-LEARNED_PRELOAD = ("torch", "tensordict", "hbmp_bench.training.checkpoints")
+LEARNED_PRELOAD = ("torch", "tensordict", "hbmp_bench.policies.checkpoints")
 """Added to ``PRELOAD`` for learned agents (registered ones and ``.pt`` checkpoints), so the agent
 process each episode starts does not import torch again (seconds); ``torch`` alone for
 ``module:Class`` agents."""

@@ -5,10 +5,10 @@ episodes. :func:`verify_results` (``leaderboard add``, and every file a board's 
 from) refuses, with :class:`ForgedResultsError` listing every problem found:
 
 - names that reach a path (``suite``, ``fidelity``, ``agent``) outside a strict pattern
-  (:data:`NAME_PATTERN`, no ``..``, no ``/``), an unknown suite or fidelity (the valid ones are
+  (:data:`~hbmp_bench.metrics.results_file.NAME_PATTERN`, no ``..``, no ``/``), an unknown suite or fidelity (the valid ones are
   named), or a file name other than the one its fields give (an entry copied over another agent's);
 - a ``summary``, ``success_pct_by_task``, ``complete``, ``subset``, ``expected_episodes`` or
-  ``sim_errors`` other than the one recomputed from the episodes (``leaderboard.scores``): a
+  ``sim_errors`` other than the one recomputed from the episodes (:func:`hbmp_bench.metrics.report.scores`): a
   hand-edited success %, "500 of 500" over one episode;
 - episodes that are not the selection's: a key missing, repeated, or outside the selection, and,
   when ``against_suite``, a selection that is not the suite's (a "complete" entry with fewer episodes
@@ -35,13 +35,11 @@ import re
 from collections import Counter
 from pathlib import Path
 
-from hbmp_bench.errors import UnknownNameError, UserError
+from hbmp_bench.errors import UserError
 from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, driving_score
-from hbmp_bench.vocabulary import COLLISION_KINDS, FIDELITIES, INFRACTION_KINDS, VIOLATION_KINDS
-
-NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.:+-]{0,127}")
-"""What a suite, fidelity or agent name of a results file may be: letters, digits and ``_ . : + -``,
-not starting with a dot, at most 128 characters, and never holding ``..`` (nor ``/``)."""
+from hbmp_bench.metrics.report import scores
+from hbmp_bench.metrics.results_file import EPISODE_COLUMNS, ForgedResultsError, name_problems, results_records
+from hbmp_bench.vocabulary import COLLISION_KINDS, INFRACTION_KINDS, VIOLATION_KINDS
 
 WORLD_END_REASONS = ("goal", "timeout", "collision", "violation", "left_network")
 """How the world ends an episode (``envs.vehicle``)."""
@@ -61,48 +59,9 @@ _INT_FIELDS = ("episode", "seed", *INFRACTION_KINDS, "decisions")
 _FLOAT_FIELDS = ("route_completion", "driving_score", "duration_s", "distance_m", "route_length_m")
 
 
-class ForgedResultsError(UserError):
-    """A results file whose claims do not follow from its episodes and its suite (see the module
-    docstring); ``problems`` lists each one."""
-
-    def __init__(self, source: str, problems: list[str]):
-        self.source, self.problems = source, list(problems)
-        shown = "; ".join(self.problems[:12]) + (f"; and {len(self.problems) - 12} more" if len(self.problems) > 12 else "")
-        super().__init__(f"{source} is refused: {shown}")
-
-
 def commitment(salt: str) -> str:
     """The SHA-256 (hex) of a salt as its text: what a salted entry publishes before the salt is revealed."""
     return hashlib.sha256(salt.encode("ascii")).hexdigest()
-
-
-def check_name(kind: str, value: object) -> str:
-    """``value`` if it is a name that may reach a file path (:data:`NAME_PATTERN`), else ValueError."""
-    if not isinstance(value, str) or not NAME_PATTERN.fullmatch(value) or ".." in value:
-        raise UserError(f"{kind} {value!r} is not a valid name: letters, digits and _ . : + - only, "
-                         f"at most 128, not starting with '.', no '..' or '/'")
-    return value
-
-
-def name_problems(doc: dict) -> list[str]:
-    """Problems of the fields that reach a path: ``suite`` (a registered suite), ``fidelity`` (one
-    of the world's) and ``agent`` (:data:`NAME_PATTERN`)."""
-    from hbmp_bench.scenarios import SUITES
-
-    problems = []
-    for kind in ("suite", "fidelity", "agent"):
-        try:
-            check_name(kind, doc.get(kind))
-        except ValueError as exc:
-            problems.append(str(exc))
-    if isinstance(doc.get("suite"), str) and doc["suite"] not in SUITES:
-        problems.append(str(UnknownNameError("suite", doc["suite"], SUITES)))
-    if doc.get("fidelity") not in FIDELITIES:
-        problems.append(f"fidelity {doc.get('fidelity')!r} is not one of {', '.join(FIDELITIES)}")
-    provenance = doc.get("provenance")
-    if isinstance(provenance, dict) and provenance.get("fidelity", doc.get("fidelity")) != doc.get("fidelity"):
-        problems.append(f"provenance.fidelity {provenance.get('fidelity')!r} is not the entry's {doc.get('fidelity')!r}")
-    return problems
 
 
 def contained(path: Path, folder: Path) -> Path:
@@ -120,8 +79,6 @@ def _label(row: dict) -> str:
 def record_problems(row: dict, *, end_on_violation: bool, end_on_collision: bool) -> list[str]:
     """Contradictions within one episode row of a results file (the suite's rules given by
     ``end_on_violation``, the paper's protocol, and ``end_on_collision``, NoCrash's)."""
-    from hbmp_bench.evaluation.leaderboard import EPISODE_COLUMNS
-
     where = _label(row)
     missing = [k for k in EPISODE_COLUMNS if k not in row]
     if missing:
@@ -317,8 +274,6 @@ def verify_results(doc: dict, source: str, *, against_suite: bool = True) -> dic
     ``against_suite`` False (rendering a board's README) skips what needs the suite's episode list
     or the agent built (seeds, route lengths, timeouts, the selection's bounds, the agent's
     privileged flag and fingerprint, the salt); ``leaderboard add`` checks everything."""
-    from hbmp_bench.evaluation.leaderboard import results_records, scores
-
     problems = name_problems(doc)
     if not isinstance(doc.get("episodes"), list):
         problems.append("it has no list of episodes")

@@ -112,12 +112,12 @@ def load_results(paths: Iterable[str | os.PathLike]) -> pd.DataFrame:
     """One row per episode of every result set, with a ``result_set`` label column.
 
     A file holding several agents or fidelities gives one set for each; a leaderboard results
-    file is one set (``evaluation.leaderboard.results_records``).
+    file is one set (:func:`~hbmp_bench.metrics.results_file.results_records`).
     """
     frames = []
     for path in records_files(paths):
         if path.suffix == ".json":
-            from hbmp_bench.evaluation.leaderboard import results_records
+            from hbmp_bench.metrics.results_file import results_records
 
             records = results_records(path)
         else:
@@ -455,3 +455,42 @@ def _write_text(path: Path, text: str) -> Path:
     tmp.write_text(text, encoding="utf-8")
     os.replace(tmp, path)
     return path
+
+
+def scores(suite: str, records: Sequence[EpisodeRecord], *, towns: Sequence[str], tasks: Sequence[str],
+           episodes: Sequence[int], agent: str = "", aggregates: bool = True) -> dict:
+    """What a results file derives from its episode records and its selection of ``suite``:
+    ``complete``, ``subset``, ``selection``, ``expected_episodes``, ``sim_errors``, ``summary`` and
+    ``aggregates`` (the report views; only ``success_pct_by_task`` when ``aggregates`` is False,
+    which is what the board's tables show). One function for ``submit``, ``add`` and ``render``,
+    so a file's claims are checked by recomputing them (``results_check``)."""
+    from hbmp_bench.metrics.summary import summarize
+    from hbmp_bench.scenarios import get_suite
+
+    spec = get_suite(suite)
+    full = (set(towns) == set(spec.towns) and set(tasks) == set(spec.tasks)
+            and list(episodes) == list(range(spec.episodes_per_task)))
+    expected = len(towns) * len(tasks) * len(episodes)
+    sim_errors = sum(r.end_reason == SIM_ERROR for r in records)
+    frame = records_frame(records, label=agent) if records else None
+    views = {}
+    if frame is not None:
+        if aggregates:
+            views = {name: view_rows(view) for name, view in build_report(frame).views.items()}
+        per_task = scored(frame).groupby("task")["success"].mean() * 100.0
+        views["success_pct_by_task"] = {t: round(float(per_task[t]), 1) for t in TASKS if t in per_task.index}
+    scored_records = [r for r in records if r.end_reason not in EXCLUDED]
+    summary = summarize(scored_records)
+    km = float(sum(r.distance_m for r in scored_records)) / 1000.0
+    events = sum(r.collisions + r.wrong_lane + r.off_road + r.red_light for r in scored_records)
+    summary["success_pct"] = round(100.0 * summary["success_rate"], 2)
+    summary["km_per_infraction"] = round(km / events, 3) if events else None
+    return {
+        "complete": full and len(records) == expected and sim_errors == 0,
+        "subset": not full,
+        "selection": {"towns": list(towns), "tasks": list(tasks), "episodes": list(episodes)},
+        "expected_episodes": expected,
+        "sim_errors": sim_errors,
+        "summary": summary,
+        "aggregates": views,
+    }

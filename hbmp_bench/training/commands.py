@@ -22,7 +22,7 @@ import time
 
 from hbmp_bench.errors import Interrupted, UserError
 from hbmp_bench.locks import Busy, exclusive_lock
-from hbmp_bench.training.checkpoints import KINDS
+from hbmp_bench.policies.checkpoints import KINDS
 
 DEFAULT_EPISODES = {"il": 3000, "hbmp": 6000, "hbmp-s": 6000, "flat": 6000}
 """Paper: 6000 RL episodes; DAgger's α starts decaying after 3000 (its IL budget is not given)."""
@@ -90,7 +90,7 @@ it began."""
 
 def recorded_env_options(checkpoint: str, names: tuple[str, ...]) -> dict[str, str]:
     """The env options ``names`` that ``checkpoint`` recorded (those it did not record are left out)."""
-    from hbmp_bench.training.checkpoints import load_checkpoint
+    from hbmp_bench.policies.checkpoints import load_checkpoint
 
     recorded = load_checkpoint(checkpoint).get("model", {}).get("env", {})
     return {k: recorded[k] for k in names if k in recorded}
@@ -188,7 +188,7 @@ def _train(kind: str, run, env_config, args: argparse.Namespace, init: str | Non
 
 def _resume_hint(args: argparse.Namespace) -> str:
     """What an interrupted ``train`` left and the command that continues it."""
-    from hbmp_bench.training.checkpoints import load_checkpoint
+    from hbmp_bench.policies.checkpoints import load_checkpoint
 
     checkpoint = os.path.join(args.out, "checkpoint.pt")
     if not os.path.isfile(checkpoint):

@@ -25,7 +25,7 @@ is evaluated; the event-fidelity policy is the paper's variant. Here:
 - whole episodes (chosen with probability ``holdout_fraction``, up to ``holdout_capacity``
   states) are kept out of training: the agreement of the learner with the expert on them is
   logged per round (``rounds.csv``);
-- the learner is the PPO actor itself (:class:`~hbmp_bench.training.models.BehaviorNetwork` with
+- the learner is the PPO actor itself (:class:`~hbmp_bench.policies.networks.BehaviorNetwork` with
   the categorical distribution), so ``train hbmp --init`` loads its weights as they are.
 
 M_t is binary, so the dataset stores it bit-packed (2304 cells → 288 bytes per state).
@@ -44,12 +44,13 @@ import torch.nn.functional as F
 from tensordict import TensorDict
 
 from hbmp_bench.errors import ConfigError, UserError
-from hbmp_bench.training.checkpoints import load_checkpoint, policy_only, save_checkpoint
-from hbmp_bench.training.models import behavior_model_cfgs, build_model, observation_shapes
+from hbmp_bench.policies.networks import behavior_model_cfgs, build_model, observation_shapes
 from hbmp_bench.training.ppo import MASK_GROUP, input_groups, model_info
-from hbmp_bench.training.run import Progress, RunConfig, episode_row, final_results, progress_bar
-from hbmp_bench.training.runlog import DAGGER_COLUMNS, EPISODE_COLUMNS, ROUND_COLUMNS, CsvLog, plot_run, write_model_card
+from hbmp_bench.training.run import RunConfig
+from hbmp_bench.training.runlog import DAGGER_COLUMNS, EPISODE_COLUMNS, ROUND_COLUMNS
+from hbmp_bench.training.session import TrainingSession
 from hbmp_bench.training.worker import WorkerEnvConfig
+from hbmp_bench.vocabulary import BEHAVIORS, NUM_BEHAVIORS
 
 
 @dataclass(frozen=True)
@@ -65,7 +66,7 @@ class DaggerConfig:
         updates_per_round: gradient steps per round.
         holdout_fraction: probability that an episode is held out (not trained on).
         holdout_capacity: most held-out states kept.
-        mask_actions: mask infeasible behaviors in the policy (see :mod:`hbmp_bench.training.models`).
+        mask_actions: mask infeasible behaviors in the policy (see :mod:`hbmp_bench.policies.networks`).
     """
 
     beta_start: float = 0.95
@@ -160,7 +161,7 @@ class DemoDataset:
         return TensorDict(groups, batch_size=[len(index)]), torch.from_numpy(self._labels[index].astype(np.int64))
 
     def label_counts(self) -> np.ndarray:
-        return np.bincount(self._labels[: self.size], minlength=5)
+        return np.bincount(self._labels[: self.size], minlength=NUM_BEHAVIORS)
 
     def state_dict(self, prefix: str) -> dict[str, np.ndarray]:
         out = {f"{prefix}/{k}": v[: self.size] for k, v in self._data.items()}
@@ -204,29 +205,21 @@ def train_dagger(run: RunConfig, env_config: WorkerEnvConfig, dagger: DaggerConf
         dagger: DAgger options.
 
     Returns:
-        The run's progress dict and the path of the final policy (``policy``).
+        The run's progress dict, the path of the final policy (``policy``) and the held-out agreement.
     """
     if run.kind != "il":
         raise ConfigError(f"DAgger trains the 'il' policy, not {run.kind!r}")
     env_config = dataclasses.replace(env_config, expert_labels=True)
-    resume = load_checkpoint(run.resume, kinds=("il",)) if run.resume else None
-    progress = Progress.from_dict(resume["progress"]) if resume else Progress()
-    if progress.episodes >= run.episodes:
-        raise ConfigError(f"the checkpoint already has {progress.episodes} episodes; ask for more than that")
+    session = TrainingSession(run)
+    resume, progress = session.resume, session.progress
     data_path = os.path.join(os.path.dirname(os.path.abspath(run.resume)), "dataset.npz") if resume else ""
     if resume and not os.path.isfile(data_path):
         raise UserError(f"DAgger goes on from its aggregated demonstrations, but {data_path} is missing beside the "
                         f"checkpoint (keep or commit dataset.npz with checkpoint.pt); without them the run would "
                         f"train on a new dataset only: start a new run instead")
-    os.makedirs(run.out, exist_ok=True)
-    torch.manual_seed(run.seed)
-    torch.set_num_threads(run.threads())
-    rng = np.random.default_rng([run.seed, progress.episodes])
-
-    env = run.vec_env(env_config, seed=run.seed * 1_000_003 + progress.episodes)
-    logs: list[CsvLog] = []
-    bar = None
-    try:
+    with session:
+        env = session.start(env_config)
+        rng = np.random.default_rng([run.seed, progress.episodes])
         obs = env.get_observations()
         groups = input_groups(obs)
         actor_cfg, critic_cfg = behavior_model_cfgs(dagger.mask_actions)
@@ -236,98 +229,95 @@ def train_dagger(run: RunConfig, env_config: WorkerEnvConfig, dagger: DaggerConf
         optimizer = torch.optim.Adam(actor.parameters(), lr=dagger.learning_rate)
         stored = {k: v for k, v in shapes.items() if k in groups or (dagger.mask_actions and k == MASK_GROUP)}
         train_set, holdout = DemoDataset(stored), DemoDataset(stored)
-        rounds = 0
         if resume is not None:
             actor.load_state_dict(resume["actor_state_dict"])
             optimizer.load_state_dict(resume["optimizer_state_dict"])
-            rounds = int(resume["progress"].get("iterations", 0))
             with np.load(data_path) as arrays:
                 train_set.load_state_dict(arrays, "train")
                 holdout.load_state_dict(arrays, "holdout")
-        options = {"kind": "il", "workers": run.workers, "backend": run.backend,
-                   **{f"env.{k}": v for k, v in info["env"].items()},
-                   **{f"dagger.{k}": v for k, v in dataclasses.asdict(dagger).items()}}
+        options = session.options(info["env"], after={f"dagger.{k}": v for k, v in dataclasses.asdict(dagger).items()})
 
         def checkpoint() -> dict[str, Any]:
-            return {"kind": "il", "model": info, "actor_state_dict": actor.state_dict(),
-                    "optimizer_state_dict": optimizer.state_dict(), "progress": progress.to_dict(),
-                    "train": {"command": run.command, "seed": run.seed, **options}}
+            return session.checkpoint(info, {"actor_state_dict": actor.state_dict(),
+                                             "optimizer_state_dict": optimizer.state_dict()}, options)
 
-        def save() -> None:
-            save_datasets(run.path("dataset.npz"), train_set, holdout)
-            save_checkpoint(run.path("checkpoint.pt"), checkpoint())
-
-        episodes_log = CsvLog(run.path("episodes.csv"), EPISODE_COLUMNS + DAGGER_COLUMNS,
-                              keep_through=progress.episodes if resume is not None else None)
-        rounds_log = CsvLog(run.path("rounds.csv"), ROUND_COLUMNS)
-        logs = [episodes_log, rounds_log]
-        bar = progress_bar(run, progress.episodes)
-        W = env.num_envs
-        labels = env.expert_actions
-        expert_steps = np.zeros(W, dtype=np.int64)
-        steps = np.zeros(W, dtype=np.int64)
-        held_out = rng.random(W) < dagger.holdout_fraction
-        last_save = progress.episodes
-        actor.eval()
-        while progress.episodes < run.episodes:
-            pending: list[tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]] = []
-            for _ in range(max(1, dagger.decisions_per_round // W)):
-                beta = expert_probability(progress.episodes, run.episodes, dagger.beta_start, dagger.hold_fraction)
-                use_expert = rng.random(W) < beta
-                actions = labels.clone()
-                if not use_expert.all():
-                    with torch.inference_mode():
-                        learner = actor(obs).squeeze(-1).long()
-                    actions = torch.where(torch.from_numpy(use_expert), labels, learner)
-                pending.append(({k: obs[k].numpy() for k in stored}, labels.numpy().astype(np.int8), held_out.copy()))
-                expert_steps += use_expert
-                steps += 1
-                obs, _, _, extras = env.step(actions.to(torch.float32).unsqueeze(-1))
-                labels = extras["expert_actions"]
-                progress.decisions += W
-                for worker, summary in env.pop_episodes():
-                    if progress.episodes < run.episodes:
-                        row = episode_row(progress, worker, summary, beta=round(beta, 4),
-                                          expert_share=round(expert_steps[worker] / max(steps[worker], 1), 4))
-                        episodes_log.write(row)
-                        bar.update(1)
-                    expert_steps[worker] = steps[worker] = 0
-                    held_out[worker] = len(holdout) < dagger.holdout_capacity and rng.random() < dagger.holdout_fraction
-                if progress.episodes >= run.episodes:
-                    break
-            for states, y, hold in pending:
-                if len(holdout) >= dagger.holdout_capacity:
-                    hold = np.zeros_like(hold)
-                train_set.add({k: v[~hold] for k, v in states.items()}, y[~hold])
-                if hold.any():
-                    holdout.add({k: v[hold] for k, v in states.items()}, y[hold])
-            rounds += 1
-            progress.iterations = rounds
+        session.open_episodes(EPISODE_COLUMNS + DAGGER_COLUMNS)
+        rounds_log = session.log("rounds.csv", ROUND_COLUMNS, key="round")
+        bar = session.start_bar()
+        learner = _Learner(actor, train_set, holdout, dagger, rng, env)
+        while not session.budget_reached:
+            beta, obs = learner.collect(env, obs, session)
+            progress.iterations += 1
             loss, hits = _train_round(actor, optimizer, train_set, dagger, rng)
-            rounds_log.write({"round": rounds, "episodes": progress.episodes, "dataset": len(train_set),
+            rounds_log.write({"round": progress.iterations, "episodes": progress.episodes, "dataset": len(train_set),
                               "holdout": len(holdout), "loss": loss, "train_agreement": hits,
                               "holdout_agreement": agreement(actor, holdout, limit=dagger.holdout_capacity),
                               "wall_s": round(progress.to_dict()["wall_s"], 1)})
             bar.set_postfix(loss=f"{loss:.3f}", beta=f"{beta:.2f}", data=len(train_set))
-            if progress.episodes - last_save >= run.save_every:
-                save()
-                last_save = progress.episodes
-        save()
-        final = checkpoint()
-        save_checkpoint(run.path("policy.pt"), policy_only(final))
-    finally:
-        env.close()
-        for log in logs:
-            log.close()
-        if bar is not None:
-            bar.close()
-    plot_run(run.out, "il (DAgger)")
-    results = final_results(run.path("episodes.csv"))
-    results["held-out agreement with the expert"] = f"{agreement(actor, holdout):.1%} on {len(holdout)} states"
-    results["expert label counts (speed_up, speed_down, change_left, change_right, keep)"] = \
-        train_set.label_counts().tolist()
-    write_model_card(run.path("MODEL_CARD.md"), "il", run.command, run.seed, final["progress"], options, results)
-    return {"progress": final["progress"], "policy": run.path("policy.pt"), "holdout_agreement": agreement(actor, holdout)}
+            if session.save_due():
+                save_datasets(session.path("dataset.npz"), train_set, holdout)
+                session.save(checkpoint())
+        save_datasets(session.path("dataset.npz"), train_set, holdout)
+        final = session.finish(checkpoint())
+    held_out = agreement(actor, holdout)
+    summary = session.write_outputs("il (DAgger)", final, options, {
+        "held-out agreement with the expert": f"{held_out:.1%} on {len(holdout)} states",
+        f"expert label counts ({', '.join(BEHAVIORS)})": train_set.label_counts().tolist(),
+    })
+    return {**summary, "holdout_agreement": held_out}
+
+
+class _Learner:
+    """DAgger's collection of one round: per decision and worker the expert's behavior with probability β,
+    else the learner's most likely one; every visited state joins the training set or, for held-out
+    episodes, the holdout set, once the round's decisions are made."""
+
+    def __init__(self, actor, train_set: DemoDataset, holdout: DemoDataset, dagger: DaggerConfig,
+                 rng: np.random.Generator, env):
+        self.actor, self.train_set, self.holdout, self.dagger, self.rng = actor, train_set, holdout, dagger, rng
+        self.W = env.num_envs
+        self.labels = env.expert_actions
+        self.expert_steps = np.zeros(self.W, dtype=np.int64)
+        self.steps = np.zeros(self.W, dtype=np.int64)
+        self.held_out = rng.random(self.W) < dagger.holdout_fraction
+        actor.eval()
+
+    def collect(self, env, obs, session: TrainingSession):
+        """Run one round's decisions; returns (the last β, the current observation)."""
+        dagger, rng, W, progress = self.dagger, self.rng, self.W, session.progress
+        stored = self.train_set.shapes
+        pending: list[tuple[dict[str, np.ndarray], np.ndarray, np.ndarray]] = []
+        beta = float("nan")
+        for _ in range(max(1, dagger.decisions_per_round // W)):
+            beta = expert_probability(progress.episodes, session.run.episodes, dagger.beta_start, dagger.hold_fraction)
+            use_expert = rng.random(W) < beta
+            actions = self.labels.clone()
+            if not use_expert.all():
+                with torch.inference_mode():
+                    learner = self.actor(obs).squeeze(-1).long()
+                actions = torch.where(torch.from_numpy(use_expert), self.labels, learner)
+            pending.append(({k: obs[k].numpy() for k in stored}, self.labels.numpy().astype(np.int8),
+                            self.held_out.copy()))
+            self.expert_steps += use_expert
+            self.steps += 1
+            obs, _, _, extras = env.step(actions.to(torch.float32).unsqueeze(-1))
+            self.labels = extras["expert_actions"]
+            progress.decisions += W
+            for worker, summary in env.pop_episodes():
+                session.record_episode(worker, summary, beta=round(beta, 4),
+                                       expert_share=round(self.expert_steps[worker] / max(self.steps[worker], 1), 4))
+                self.expert_steps[worker] = self.steps[worker] = 0
+                self.held_out[worker] = (len(self.holdout) < dagger.holdout_capacity
+                                         and rng.random() < dagger.holdout_fraction)
+            if session.budget_reached:
+                break
+        for states, y, hold in pending:
+            if len(self.holdout) >= dagger.holdout_capacity:
+                hold = np.zeros_like(hold)
+            self.train_set.add({k: v[~hold] for k, v in states.items()}, y[~hold])
+            if hold.any():
+                self.holdout.add({k: v[hold] for k, v in states.items()}, y[hold])
+        return beta, obs
 
 
 def _train_round(actor, optimizer, data: DemoDataset, dagger: DaggerConfig,

@@ -69,7 +69,6 @@ import contextlib
 import copy
 import dataclasses
 import io
-import os
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -81,10 +80,11 @@ from rsl_rl.utils import resolve_optimizer
 from rsl_rl.utils.logger import Logger
 
 from hbmp_bench.errors import ConfigError, UserError
-from hbmp_bench.training.checkpoints import load_checkpoint, policy_only, save_checkpoint
-from hbmp_bench.training.models import behavior_model_cfgs, control_model_cfgs, observation_shapes
-from hbmp_bench.training.run import Progress, RunConfig, episode_row, final_results, progress_bar
-from hbmp_bench.training.runlog import EPISODE_COLUMNS, ITERATION_COLUMNS, CsvLog, plot_run, write_model_card
+from hbmp_bench.policies.checkpoints import load_checkpoint
+from hbmp_bench.policies.networks import behavior_model_cfgs, control_model_cfgs, observation_shapes
+from hbmp_bench.training.run import RunConfig
+from hbmp_bench.training.runlog import EPISODE_COLUMNS, ITERATION_COLUMNS
+from hbmp_bench.training.session import TrainingSession
 from hbmp_bench.training.validation import Validator, validation_results
 from hbmp_bench.training.worker import WorkerEnvConfig
 
@@ -225,7 +225,7 @@ class PPOConfig:
             a multiple of ``mini_batch_size``.
         lam, num_learning_epochs, entropy_coef, value_loss_coef, max_grad_norm: rsl-rl's defaults.
         reward_scale: factor on the training reward (see the module notes).
-        mask_actions: mask infeasible behaviors in the policy (see :mod:`hbmp_bench.training.models`).
+        mask_actions: mask infeasible behaviors in the policy (see :mod:`hbmp_bench.policies.networks`).
         init_std: initial standard deviation of the flat baseline's Gaussian controls.
         critic_warmup_episodes: episodes at the start of a run during which only the critic
             learns (the actor's learning rate is 0); see the module notes.
@@ -413,72 +413,40 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
     """
     if run.kind == "il":
         raise ConfigError("train il with hbmp_bench.training.dagger.train_dagger")
-    resume = load_checkpoint(run.resume, kinds=(run.kind,)) if run.resume else None
-    if resume is not None:
-        recorded = PPOConfig.from_options(resume["train"])
-        if ppo is not None and recorded != ppo:
-            changed = {k: v for k, v in dataclasses.asdict(ppo).items() if dataclasses.asdict(recorded)[k] != v}
-            warnings.warn(f"resuming with the run's recorded PPO options, not {changed}", stacklevel=2)
-        ppo = recorded
-    ppo = ppo or PPOConfig()
+    session = TrainingSession(run)
+    resume = session.resume
+    ppo = _recorded_ppo(resume, ppo) if resume is not None else ppo or PPOConfig()
     env_config = dataclasses.replace(env_config, reward_scale=ppo.reward_scale, expert_labels=False)
     init_ckpt = load_checkpoint(init, kinds=("il", "hbmp", "hbmp-s")) if init and resume is None else None
-    progress = Progress.from_dict(resume["progress"]) if resume else Progress()
-    if progress.episodes >= run.episodes:
-        raise ConfigError(f"the checkpoint already has {progress.episodes} episodes; ask for more than that")
-    os.makedirs(run.out, exist_ok=True)
-    torch.manual_seed(run.seed + progress.episodes)
-    torch.set_num_threads(run.threads())
-
     from rsl_rl.runners import OnPolicyRunner
 
-    env = run.vec_env(env_config, seed=run.seed * 1_000_003 + progress.episodes)
-    log = iterations = bar = validator = None
-    try:
-        from gymnasium import spaces
-
-        groups = input_groups(env.get_observations())
-        discrete = isinstance(env.action_space, spaces.Discrete)
-        if ppo.mask_actions and not discrete:
-            raise ConfigError("mask_actions needs a behavior env with an action mask")
-        if ppo.temperature != 1.0 and not discrete:
-            raise ConfigError("temperature is the behavior policy's (a categorical); "
-                             "the flat baseline's controls are Gaussian")
-        actor_cfg, critic_cfg = (behavior_model_cfgs(ppo.mask_actions, temperature=ppo.temperature) if discrete
-                                 else control_model_cfgs(ppo.init_std))
+    with session:
+        env = session.start(env_config)
+        actor_cfg, critic_cfg, groups = _model_cfgs(env, ppo)
         cfg = ppo.runner_cfg(env.num_envs, {"actor": groups, "critic": groups}, actor_cfg, critic_cfg)
         with contextlib.redirect_stdout(io.StringIO()):
             runner = OnPolicyRunner(env, cfg, log_dir=None, device="cpu")
         info = model_info(env, actor_cfg, critic_cfg, groups)
         alg = runner.alg
-        if resume is not None:
-            alg.load(resume, {"actor": True, "critic": True, "optimizer": "optimizer_state_dict" in resume}, strict=True)
-            if "anchor_state_dict" in resume:
-                alg.set_anchor(resume["anchor_state_dict"])
-        elif init_ckpt is not None:
-            check_init_compatible(init_ckpt, info)
-            alg.get_policy().load_state_dict(init_ckpt["actor_state_dict"])
-            alg.set_anchor(init_ckpt["actor_state_dict"])
+        _load_weights(alg, resume, init_ckpt, info)
         if ppo.anchor_coef > 0 and alg.anchor is None:
             raise ConfigError("anchor_coef > 0 needs an --init actor to anchor to")
-        options = {"kind": run.kind, "workers": run.workers, "backend": run.backend,
-                   "init": (init_label or init) if resume is None else None,
-                   **{f"env.{k}": v for k, v in info["env"].items()}, "reward": env_config.reward,
-                   **{f"ppo.{k}": v for k, v in dataclasses.asdict(ppo).items()}}
-        if resume is not None:
-            options["init"] = resume["train"].get("init")
+        init_option = (init_label or init) if resume is None else resume["train"].get("init")
+        options = session.options(info["env"], before={"init": init_option},
+                                  after={"reward": env_config.reward,
+                                         **{f"ppo.{k}": v for k, v in dataclasses.asdict(ppo).items()}})
 
         def checkpoint() -> dict[str, Any]:
             anchor = {} if alg.anchor is None else {"anchor_state_dict": alg.anchor.state_dict()}
-            return {"kind": run.kind, "model": info, "actor_state_dict": alg.get_policy().state_dict(),
-                    "critic_state_dict": alg.critic.state_dict(), **anchor,
-                    "progress": progress.to_dict(), "train": {"command": run.command, "seed": run.seed, **options}}
+            return session.checkpoint(info, {"actor_state_dict": alg.get_policy().state_dict(),
+                                             "critic_state_dict": alg.critic.state_dict(), **anchor}, options)
 
-        log = CsvLog(run.path("episodes.csv"), EPISODE_COLUMNS, keep_through=progress.episodes if resume else None)
-        iterations = CsvLog(run.path("iterations.csv"), ITERATION_COLUMNS,
-                            keep_through=progress.iterations if resume else None, key="iteration")
-        validator = Validator(run.out, run.validate_every, run.workers, env_config.kwargs.get("fidelity"),
-                              resumed_at=progress.episodes if resume else None, episodes=run.validate_episodes)
+        progress = session.progress
+        session.open_episodes(EPISODE_COLUMNS)
+        iterations = session.log("iterations.csv", ITERATION_COLUMNS, key="iteration")
+        validator = session.track(Validator(run.out, run.validate_every, run.workers, env_config.kwargs.get("fidelity"),
+                                            resumed_at=progress.episodes if resume else None,
+                                            episodes=run.validate_episodes))
 
         def validate_if_due(say) -> None:
             if validator.due(progress.episodes):
@@ -488,30 +456,25 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
                     f"(best {validator.best:.1%})")
 
         validate_if_due(lambda text: print(text, flush=True) if run.progress else None)  # a fresh run: the init
-        bar = progress_bar(run, progress.episodes)
-        last_save = progress.episodes
+        bar = session.start_bar()
         alg.freeze_actor(progress.episodes < ppo.critic_warmup_episodes)
 
         def after_iteration(losses: dict[str, float]) -> None:
-            nonlocal last_save
             progress.iterations += 1
             progress.decisions += cfg["num_steps_per_env"] * env.num_envs
             frozen = alg.actor_frozen
             for worker, summary in env.pop_episodes():
-                if progress.episodes >= run.episodes:
+                if not session.record_episode(worker, summary):
                     break
-                log.write(episode_row(progress, worker, summary))
-                bar.update(1)
             iterations.write({"iteration": progress.iterations, "episode": progress.episodes,
                               "decisions": progress.decisions, "actor_frozen": frozen,
                               **losses,  # value, surrogate, entropy, kl_init, actor_lr
                               "wall_s": progress.to_dict()["wall_s"]})
             alg.freeze_actor(progress.episodes < ppo.critic_warmup_episodes)
-            if progress.episodes - last_save >= run.save_every:
-                save_checkpoint(run.path("checkpoint.pt"), checkpoint())
-                last_save = progress.episodes
+            if session.save_due():
+                session.save(checkpoint())
             validate_if_due(bar.write)
-            if progress.episodes >= run.episodes:
+            if session.budget_reached:
                 raise BudgetReached
 
         runner.logger = RunLogger(runner, after_iteration)
@@ -520,17 +483,43 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
             runner.learn(num_learning_iterations=10**9)
         except BudgetReached:
             pass
-        final = checkpoint()
-        save_checkpoint(run.path("checkpoint.pt"), final)
-        save_checkpoint(run.path("policy.pt"), policy_only(final))
-    finally:
-        env.close()
-        for csv_log in (log, iterations, validator):
-            if csv_log is not None:
-                csv_log.close()
-        if bar is not None:
-            bar.close()
-    plot_run(run.out, f"{run.kind} ({env_config.reward} reward)")
-    write_model_card(run.path("MODEL_CARD.md"), run.kind, run.command, run.seed, final["progress"], options,
-                     {**final_results(run.path("episodes.csv")), **validation_results(run.out)})
-    return {"progress": final["progress"], "policy": run.path("policy.pt")}
+        final = session.finish(checkpoint())
+    return session.write_outputs(f"{run.kind} ({env_config.reward} reward)", final, options,
+                                 validation_results(run.out))
+
+
+def _recorded_ppo(resume: dict[str, Any], asked: PPOConfig | None) -> PPOConfig:
+    """The PPO options a resumed run recorded (a warning names any asked for here that differ)."""
+    recorded = PPOConfig.from_options(resume["train"])
+    if asked is not None and recorded != asked:
+        changed = {k: v for k, v in dataclasses.asdict(asked).items() if dataclasses.asdict(recorded)[k] != v}
+        warnings.warn(f"resuming with the run's recorded PPO options, not {changed}", stacklevel=3)
+    return recorded
+
+
+def _model_cfgs(env, ppo: PPOConfig) -> tuple[dict, dict, list[str]]:
+    """The actor and critic configs for ``env``'s action space and the observation groups they read."""
+    from gymnasium import spaces
+
+    groups = input_groups(env.get_observations())
+    discrete = isinstance(env.action_space, spaces.Discrete)
+    if ppo.mask_actions and not discrete:
+        raise ConfigError("mask_actions needs a behavior env with an action mask")
+    if ppo.temperature != 1.0 and not discrete:
+        raise ConfigError("temperature is the behavior policy's (a categorical); "
+                          "the flat baseline's controls are Gaussian")
+    actor_cfg, critic_cfg = (behavior_model_cfgs(ppo.mask_actions, temperature=ppo.temperature) if discrete
+                             else control_model_cfgs(ppo.init_std))
+    return actor_cfg, critic_cfg, groups
+
+
+def _load_weights(alg, resume: dict[str, Any] | None, init: dict[str, Any] | None, info: dict[str, Any]) -> None:
+    """The resumed run's actor, critic, optimizer and anchor; or the ``--init`` actor, also as the anchor."""
+    if resume is not None:
+        alg.load(resume, {"actor": True, "critic": True, "optimizer": "optimizer_state_dict" in resume}, strict=True)
+        if "anchor_state_dict" in resume:
+            alg.set_anchor(resume["anchor_state_dict"])
+    elif init is not None:
+        check_init_compatible(init, info)
+        alg.get_policy().load_state_dict(init["actor_state_dict"])
+        alg.set_anchor(init["actor_state_dict"])

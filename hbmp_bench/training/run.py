@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from hbmp_bench.errors import ConfigError, UnknownNameError
-from hbmp_bench.training.checkpoints import KINDS
+from hbmp_bench.policies.checkpoints import KINDS
 
 BACKENDS = ("process", "ray")
 """Where training workers run: local processes over pipes, or Ray actors (a local instance or a cluster)."""
@@ -92,12 +92,6 @@ class RunConfig:
             return max(1, self.torch_threads)
         local_workers = 0 if self.address is not None else self.workers  # a cluster's actors run elsewhere
         return max(1, (os.cpu_count() or 1) - local_workers)
-
-    def vec_env(self, env_config, seed: int):
-        """The training ``VecEnv`` of this run's backend, ``workers`` environments."""
-        from hbmp_bench.training.vec_env import make_vec_env
-
-        return make_vec_env(env_config, self.workers, seed=seed, backend=self.backend, address=self.address)
 
 
 @dataclass

@@ -125,7 +125,7 @@ class Validator:
         """Validate ``checkpoint`` (the run at ``episodes``), log it, keep it as ``best.pt`` if best."""
         import tempfile
 
-        from hbmp_bench.training.checkpoints import actor_only, save_checkpoint
+        from hbmp_bench.policies.checkpoints import actor_only, save_checkpoint
 
         actor = actor_only(checkpoint)
         with tempfile.TemporaryDirectory(prefix="hbmp-validation-") as folder:

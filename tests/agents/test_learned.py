@@ -9,8 +9,8 @@ import torch
 
 from hbmp_bench.agents import AGENTS, Agent, load_agent
 from hbmp_bench.agents import learned
-from hbmp_bench.training.checkpoints import CheckpointError, save_checkpoint
-from hbmp_bench.training.models import behavior_model_cfgs, build_model
+from hbmp_bench.policies.checkpoints import CheckpointError, save_checkpoint
+from hbmp_bench.policies.networks import behavior_model_cfgs, build_model
 
 SHAPES = {"occupancy": [1, 64, 36], "road": [10], "action_mask": [5]}
 GROUPS = {"actor": ["occupancy", "road"], "critic": ["occupancy", "road"]}

@@ -9,7 +9,7 @@ folder = os.environ.get("HBMP_TEST_AGENT_DIR")
 if folder:
     Path(folder, "pwned-checkpoint").write_text(str(os.getuid()))
 
-from hbmp_bench.training.models import BehaviorNetwork  # noqa: E402
+from hbmp_bench.policies.networks import BehaviorNetwork  # noqa: E402
 
 
 class Evil(BehaviorNetwork):

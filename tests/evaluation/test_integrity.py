@@ -160,7 +160,7 @@ def test_the_fork_server_preloads_trusted_modules_only():
 
     limits = RunnerLimits(agent_preload=("numpy.linalg",))
     assert preload_for("expert", RunnerLimits()) == PRELOAD
-    assert {"torch", "tensordict", "hbmp_bench.training.checkpoints"} <= set(preload_for("hbmp", limits))
+    assert {"torch", "tensordict", "hbmp_bench.policies.checkpoints"} <= set(preload_for("hbmp", limits))
     assert {"torch", "tensordict"} <= set(preload_for("runs/il/policy.pt", limits))
     plugin = preload_for("my_pkg.agents:Agent", limits)
     assert "torch" in plugin and "numpy.linalg" in plugin and not any("my_pkg" in m for m in plugin)

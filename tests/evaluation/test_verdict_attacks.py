@@ -73,7 +73,7 @@ def _hostile_checkpoint(folder: Path, actor=None, distribution=None) -> Path:
 
 @pytest.mark.parametrize("where", ["actor", "distribution"])
 def test_a_checkpoint_cannot_name_its_own_classes(readable_dir, where):
-    from hbmp_bench.training.checkpoints import NETWORK_CLASSES, CheckpointError, load_checkpoint
+    from hbmp_bench.policies.checkpoints import NETWORK_CLASSES, CheckpointError, load_checkpoint
 
     path = _hostile_checkpoint(readable_dir, **{where: "checkpoint_payload:Evil"})
     with pytest.raises(CheckpointError, match="checkpoint_payload:Evil") as refused:

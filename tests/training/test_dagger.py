@@ -8,9 +8,9 @@ import pytest
 import torch
 
 from hbmp_bench.errors import UserError
-from hbmp_bench.training.checkpoints import build_actor, load_checkpoint
+from hbmp_bench.policies.checkpoints import build_actor, load_checkpoint
 from hbmp_bench.training.dagger import DaggerConfig, DemoDataset, agreement, expert_probability, train_dagger
-from hbmp_bench.training.models import behavior_model_cfgs, build_model
+from hbmp_bench.policies.networks import behavior_model_cfgs, build_model
 from hbmp_bench.training.run import RunConfig
 from hbmp_bench.training.runlog import read_csv
 from hbmp_bench.training.worker import WorkerEnvConfig

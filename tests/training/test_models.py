@@ -5,8 +5,8 @@ import torch
 from rsl_rl.storage import RolloutStorage
 from torch.distributions import Categorical
 
-from hbmp_bench.training.distributions import CategoricalDistribution
-from hbmp_bench.training.models import (
+from hbmp_bench.policies.distributions import CategoricalDistribution
+from hbmp_bench.policies.networks import (
     BehaviorNetwork,
     behavior_model_cfgs,
     build_model,

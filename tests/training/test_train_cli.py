@@ -241,7 +241,7 @@ def test_the_resume_hint_is_a_command_train_accepts(tmp_path):
     import shlex
 
     from hbmp_bench.cli import build_parser
-    from hbmp_bench.training.checkpoints import save_checkpoint
+    from hbmp_bench.policies.checkpoints import save_checkpoint
     from hbmp_bench.training.commands import _resume_hint
 
     out = tmp_path / "run"

@@ -5,7 +5,7 @@ layer, the R_t branch is fully connected layers, the two outputs are concatenate
 the final fully connected layers; the actor ends in a softmax over the behaviors, the critic in a
 state value. :class:`BehaviorNetwork` builds exactly that from rsl-rl parts: ``rsl_rl.modules.CNN``
 for the convolutions, ``rsl_rl.modules.MLP`` for the final layers, and a pluggable
-``Distribution`` for the output (:class:`~hbmp_bench.training.distributions.CategoricalDistribution`
+``Distribution`` for the output (:class:`~hbmp_bench.policies.distributions.CategoricalDistribution`
 for the behaviors; rsl-rl's ``GaussianDistribution`` for the flat baseline's controls).
 
 rsl-rl's own ``CNNModel`` concatenates the raw 1-D groups with the CNN features, with no FC
@@ -31,11 +31,14 @@ from rsl_rl.modules import CNN, HiddenState
 from rsl_rl.utils import resolve_nn_activation
 from tensordict import TensorDict
 
+from hbmp_bench.vocabulary import NUM_BEHAVIORS
+
 MASKED_LOGIT = -1.0e8
 """Logit given to a masked behavior (finite, so entropies and KLs stay finite)."""
 
-MODEL_CLASS = "hbmp_bench.training.models:BehaviorNetwork"
-CATEGORICAL_CLASS = "hbmp_bench.training.distributions:CategoricalDistribution"
+MODEL_CLASS = "hbmp_bench.policies.networks:BehaviorNetwork"
+CATEGORICAL_CLASS = "hbmp_bench.policies.distributions:CategoricalDistribution"
+GAUSSIAN_CLASS = "rsl_rl.modules.distribution:GaussianDistribution"
 
 
 class BehaviorNetwork(MLPModel):
@@ -166,10 +169,10 @@ NETWORK = {
 policy rebuilds the same network even if the class defaults change."""
 
 
-def behavior_model_cfgs(mask_actions: bool = False, num_categories: int = 5,
+def behavior_model_cfgs(mask_actions: bool = False, num_categories: int = NUM_BEHAVIORS,
                         temperature: float = 1.0) -> tuple[dict, dict]:
     """rsl-rl ``actor`` and ``critic`` configs for the behavior policy (paper's network); ``temperature``:
-    the categorical's (:class:`~hbmp_bench.training.distributions.CategoricalDistribution`)."""
+    the categorical's (:class:`~hbmp_bench.policies.distributions.CategoricalDistribution`)."""
     distribution = {"class_name": CATEGORICAL_CLASS, "num_categories": num_categories}
     if temperature != 1.0:  # configs of the paper's softmax stay as they were recorded
         distribution["temperature"] = temperature
@@ -183,7 +186,7 @@ def behavior_model_cfgs(mask_actions: bool = False, num_categories: int = 5,
 def control_model_cfgs(init_std: float = 0.5) -> tuple[dict, dict]:
     """rsl-rl ``actor`` and ``critic`` configs for the flat baseline: same network, Gaussian controls."""
     actor = {"class_name": MODEL_CLASS, **NETWORK,
-             "distribution_cfg": {"class_name": "rsl_rl.modules.distribution:GaussianDistribution",
+             "distribution_cfg": {"class_name": GAUSSIAN_CLASS,
                                   "init_std": init_std, "std_type": "log"}}
     return actor, {"class_name": MODEL_CLASS, **NETWORK}
 

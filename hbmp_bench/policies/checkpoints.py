@@ -35,12 +35,21 @@ CHECKPOINT_FORMAT = "hbmp_bench.checkpoint.v1"
 KINDS = ("il", "hbmp", "hbmp-s", "flat")
 PLAIN_TYPES = (str, int, float, bool, type(None))
 NETWORK_CLASSES = (
-    "hbmp_bench.training.models:BehaviorNetwork",
-    "hbmp_bench.training.distributions:CategoricalDistribution",
+    "hbmp_bench.policies.networks:BehaviorNetwork",
+    "hbmp_bench.policies.distributions:CategoricalDistribution",
     "rsl_rl.modules.distribution:GaussianDistribution",
 )
 """The only ``class_name`` values a checkpoint's model config may hold: the paper's network, its
-categorical output and the Gaussian output of the flat baseline (what ``training.models`` writes)."""
+categorical output and the Gaussian output of the flat baseline (what :mod:`hbmp_bench.policies.networks`
+writes)."""
+FORMER_NETWORK_CLASSES = {
+    "hbmp_bench.training.models:BehaviorNetwork": "hbmp_bench.policies.networks:BehaviorNetwork",
+    "hbmp_bench.training.distributions:CategoricalDistribution":
+        "hbmp_bench.policies.distributions:CategoricalDistribution",
+}
+"""Where the package's network classes lived when the shipped checkpoints were written (under
+``training``): a checkpoint naming one of these is read as naming the class it became, so every
+checkpoint written before the move loads, and building it never imports the training code."""
 
 
 def _check_plain(value: Any, where: str) -> None:
@@ -119,7 +128,7 @@ def load_checkpoint(path: str, kinds: tuple[str, ...] = KINDS) -> dict[str, Any]
     if checkpoint.get("kind") not in kinds:
         raise CheckpointError(f"{path!r} holds a {checkpoint.get('kind')!r} policy; expected one of {kinds}")
     check_network_classes(checkpoint, path)
-    return checkpoint
+    return current_class_names(checkpoint)
 
 
 def _class_names(value: Any, where: str):
@@ -135,6 +144,17 @@ def _class_names(value: Any, where: str):
             yield from _class_names(v, f"{where}[{k}]")
 
 
+def current_class_names(value: Any) -> Any:
+    """``value`` (a checkpoint or part of one) with every ``class_name`` of :data:`FORMER_NETWORK_CLASSES`
+    replaced by the name of the class it became (a new dict; tensors are shared, not copied)."""
+    if isinstance(value, dict):
+        return {k: FORMER_NETWORK_CLASSES.get(v, v) if k == "class_name" and isinstance(v, str)
+                else current_class_names(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [current_class_names(v) for v in value]
+    return value
+
+
 def check_network_classes(checkpoint: dict[str, Any], path: str = "checkpoint") -> None:
     """Refuse a checkpoint whose model config names a class outside ``NETWORK_CLASSES``.
 
@@ -144,7 +164,7 @@ def check_network_classes(checkpoint: dict[str, Any], path: str = "checkpoint") 
     entry, the class it names and the allowed ones.
     """
     for where, name in _class_names(checkpoint.get("model"), "model"):
-        if name not in NETWORK_CLASSES:
+        if name not in NETWORK_CLASSES and name not in FORMER_NETWORK_CLASSES:
             raise CheckpointError(
                 f"checkpoint {path!r} is refused: {where} is {name!r}, and a checkpoint may only build the "
                 f"package's own networks ({', '.join(NETWORK_CLASSES)}); write checkpoints with hbmp-bench train")
@@ -165,10 +185,10 @@ def build_actor(checkpoint: dict[str, Any]):
     """The policy network of a checkpoint, weights loaded, in eval mode (its classes checked
     against ``NETWORK_CLASSES`` first, also for a checkpoint dict that did not come from
     ``load_checkpoint``)."""
-    from hbmp_bench.training.models import build_model
+    from hbmp_bench.policies.networks import build_model
 
     check_network_classes(checkpoint)
-    model = checkpoint["model"]
+    model = current_class_names(checkpoint["model"])
     shapes = {k: tuple(v) for k, v in model["obs_shapes"].items()}
     actor = build_model(model["actor"], shapes, model["obs_groups"], "actor", model["num_actions"])
     actor.load_state_dict(checkpoint["actor_state_dict"])

@@ -7,8 +7,8 @@ deterministic output are the index as a float, shape (batch, 1).
 
 Use it in a model config as::
 
-    distribution_cfg = {"class_name": "hbmp_bench.training.distributions:CategoricalDistribution",
-                        "num_categories": 5}
+    distribution_cfg = {"class_name": "hbmp_bench.policies.distributions:CategoricalDistribution",
+                        "num_categories": NUM_BEHAVIORS}
 """
 
 from __future__ import annotations
@@ -17,6 +17,8 @@ import torch
 import torch.nn as nn
 from rsl_rl.modules.distribution import Distribution
 from torch.distributions import Categorical
+
+from hbmp_bench.vocabulary import NUM_BEHAVIORS
 
 
 class CategoricalDistribution(Distribution):
@@ -32,7 +34,7 @@ class CategoricalDistribution(Distribution):
             deterministic output, the most likely behavior, does not depend on it.
     """
 
-    def __init__(self, output_dim: int = 1, num_categories: int = 5, init_logit_scale: float = 0.01,
+    def __init__(self, output_dim: int = 1, num_categories: int = NUM_BEHAVIORS, init_logit_scale: float = 0.01,
                  temperature: float = 1.0) -> None:
         if not temperature > 0:
             raise ValueError(f"temperature must be > 0, got {temperature}")
