@@ -23,7 +23,8 @@ is taken (a time window):
 ``_rule_yield``          stop before the junction (or, inside it, before the conflict area) for a
                          vehicle on a conflicting link that would be in the conflict area while the
                          ego is; a standing foe is passed unless it has the right of way and the ego
-                         has not entered the junction yet; a foe held by a red light is passed.
+                         has not entered the junction yet; a foe held by a red light is passed, unless
+                         it comes at it well over its speed limit (it will run the red).
 ``_rule_pedestrians``    stop before a pedestrian who is in the ego's path or walks into it while the
                          ego would pass, unless a red signal holds them at the kerb of a crossing
                          (before the crossing, where that is on a crossing of its path: a car
@@ -331,8 +332,9 @@ class ExpertAgent:
         for f in scene.get("junction_foes", ()):
             if f["ego_dist_m"] > exit_m:
                 continue  # a conflict at a later junction: judged once the ego has crossed this one
-            if (f["foe_signal"] and f["foe_signal"] in RED) or f["ego_exit_m"] + EGO_LENGTH_M < 0.0 or f["foe_exit_m"] + EGO_LENGTH_M < 0.0:
-                continue  # held by its light, or one of the two has passed the conflict area
+            held = f["foe_signal"] and f["foe_signal"] in RED and not f.get("foe_speeding")
+            if held or f["ego_exit_m"] + EGO_LENGTH_M < 0.0 or f["foe_exit_m"] + EGO_LENGTH_M < 0.0:
+                continue  # held by its light (unless it speeds at it), or one has passed the conflict area
             if f["ego_dist_m"] <= 0.5:
                 continue  # the ego is in the conflict area: clear it
             v_foe = f["foe_speed_mps"]

@@ -40,6 +40,7 @@ of the actors near the path), and
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -127,7 +128,13 @@ def gives_way(signal: str, state: str, other_signal: str, other_state: str) -> b
     return False
 
 
-def junction_foes(entry_m: float, signal: str, state: str, conflicts, users, foe_signals) -> tuple[dict, ...]:
+SPEEDING_FACTOR = 1.2
+"""A foe faster than this times its lane's limit is ``foe_speeding``: a driver who will not stop for its
+red (SUMO's own keep within a few percent of the limit: ``--default.speeddev 0.05``)."""
+
+
+def junction_foes(entry_m: float, signal: str, state: str, conflicts, users, foe_signals,
+                  foe_limits=None) -> tuple[dict, ...]:
     """The ``junction_foes`` of the scene: one dict per vehicle on a conflicting link.
 
     Args:
@@ -137,16 +144,18 @@ def junction_foes(entry_m: float, signal: str, state: str, conflicts, users, foe
         users: per conflict, the vehicles on or before the foe link: (id, distance from the
             front bumper to the link's start [m], negative inside, speed [m/s]).
         foe_signals: per conflict, the foe link's signal char ("" without a light).
+        foe_limits: per conflict, the speed limit of the foe link's lane [m/s] (None: no limits known).
 
     Returns:
         dicts with ``ego_dist_m`` / ``ego_exit_m``: distance from the ego's front bumper to the
         start / end of the conflict area [m]; ``foe_dist_m`` / ``foe_exit_m``: the same for the
         foe's front bumper; ``foe_speed_mps``; ``ego_yields`` / ``foe_yields`` (:func:`gives_way`);
         ``foe_signal``: the foe's signal before it enters the junction ("" without a light or once
-        inside).
+        inside); ``foe_speeding``: faster than :data:`SPEEDING_FACTOR` times its lane's limit.
     """
     out = []
-    for c, link_users, foe_signal in zip(conflicts, users, foe_signals):
+    limits = foe_limits if foe_limits is not None else [math.inf] * len(conflicts)
+    for c, link_users, foe_signal, limit in zip(conflicts, users, foe_signals, limits):
         for _, dist, speed in link_users:
             out.append({
                 "ego_dist_m": entry_m + c.at_m, "ego_exit_m": entry_m + c.clear_m,
@@ -154,6 +163,7 @@ def junction_foes(entry_m: float, signal: str, state: str, conflicts, users, foe
                 "ego_yields": gives_way(signal, state, foe_signal, c.foe.state),
                 "foe_yields": gives_way(foe_signal, c.foe.state, signal, state),
                 "foe_signal": foe_signal if dist > 0.0 else "",
+                "foe_speeding": bool(speed > SPEEDING_FACTOR * limit),
             })
     return tuple(out)
 
@@ -238,7 +248,8 @@ class PrivilegedScene:
                        if u[0] != self.vehicle_id) for c in conflicts]
         signals = [self.sim.light_state(c.foe.tls, c.foe.link_index) if c.foe.tls else "" for c in conflicts]
         signal = self.sim.light_state(link.tls, link.link_index) if link.tls else ""
-        return junction_foes(entry, signal, link.state, conflicts, users, signals)
+        limits = [self.net.lane(c.foe.from_lane).speed for c in conflicts]
+        return junction_foes(entry, signal, link.state, conflicts, users, signals, limits)
 
     def _crossings(self, link: Connection, entry: float, actors: Actors) -> tuple[tuple[dict, tuple[str, ...]], ...]:
         """(the scene's entry, the ids of the pedestrians waiting to step onto it) per crossing."""

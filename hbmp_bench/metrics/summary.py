@@ -7,7 +7,8 @@ from collections.abc import Iterable
 import pandas as pd
 
 from hbmp_bench.metrics.records import DRIVING_SCORE_DEFINITION, EpisodeRecord
-from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS
+from hbmp_bench.scenarios.scenario_types import all_tasks
+from hbmp_bench.scenarios.spec import TASK_LABELS
 from hbmp_bench.vocabulary import COLLISION_KINDS
 
 
@@ -77,7 +78,7 @@ def success_table(records: Iterable[EpisodeRecord]) -> pd.DataFrame:
     if df.empty:
         return pd.DataFrame()
     table = df.pivot_table(index="task", columns="town", values="success", aggfunc="mean") * 100.0
-    order = [t for t in TASKS if t in table.index]
+    order = [t for t in all_tasks() if t in table.index]
     table = table.loc[order].round(1)
     table.index = [TASK_LABELS[t] for t in table.index]
     return table

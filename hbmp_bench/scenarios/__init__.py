@@ -1,6 +1,7 @@
 """Scenario registry: tasks, suites and deterministic episode lists (no SUMO at import)."""
 
 from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS, Episode, Suite, Traffic
+from hbmp_bench.scenarios.scenario_types import SCENARIO_TYPES, all_tasks
 from hbmp_bench.scenarios.suites import (
     SUITES,
     all_episodes,
@@ -13,11 +14,13 @@ from hbmp_bench.scenarios.suites import (
     episode_entropy,
     road_network,
     sample_episode,
+    selection_size,
     suite_episodes,
     traffic_for,
 )
 
 __all__ = [
+    "SCENARIO_TYPES",
     "SUITES",
     "TASKS",
     "TASK_LABELS",
@@ -25,6 +28,7 @@ __all__ = [
     "Suite",
     "Traffic",
     "all_episodes",
+    "all_tasks",
     "basis_town",
     "check_salt",
     "check_task",
@@ -34,6 +38,7 @@ __all__ = [
     "episode_entropy",
     "road_network",
     "sample_episode",
+    "selection_size",
     "suite_episodes",
     "traffic_for",
 ]

@@ -245,13 +245,19 @@ class PedestrianStepsOut(Script):
 @dataclass(frozen=True)
 class JunctionHazard:
     """Where a junction hazard happens: the ``k``-th junction of the route (``route[k]`` to
-    ``route[k + 1]``), the ego's link there and the foe link its actors drive, ``ahead_m`` [m] from the
-    ego's start to the junction's stop line."""
+    ``route[k + 1]``), the ego's link there, where the foe link its actors drive crosses it
+    (``conflict``, a ``roadnet.LinkConflict``) and ``ahead_m`` [m] from the ego's start to the junction's
+    stop line."""
 
     k: int
     link: object
-    foe: object
+    conflict: object
     ahead_m: float
+
+    @property
+    def foe(self):
+        """The foe link (``roadnet.Connection``)."""
+        return self.conflict.foe
 
 
 def _opposite_heading(net: RoadNetwork, edge: str, other: str) -> float:
@@ -271,8 +277,9 @@ def junction_hazard(net: RoadNetwork, episode: Episode, kind: str) -> JunctionHa
       link of the approach opposite it (within 30 degrees of head-on);
     - ``give_way``: the ego's link has no light and yields (SUMO state ``m``) to a major link (``M``)
       that crosses it;
-    - ``red_light``: the ego goes straight at a light across the straight link of an approach at
-      60-120 degrees to its own.
+    - ``merge``: the same, where the major link leads onto the ego's next edge (a ramp or a merge);
+    - ``red_light``: the ego goes straight at a light across the straight or left-turn link of an
+      approach at 60-120 degrees to its own (at a T junction, the stem's left turn).
     """
     ahead = net.edge_length[episode.route[0]] - episode.start_pos
     for k, (a, b) in enumerate(zip(episode.route[:-1], episode.route[1:])):
@@ -288,12 +295,14 @@ def junction_hazard(net: RoadNetwork, episode: Episode, kind: str) -> JunctionHa
                 angle = _opposite_heading(net, a, foe.from_edge)
                 if kind == "unprotected_left" and link.direction == "l" and link.tls and foe.direction == "s" \
                         and angle > math.radians(150):
-                    return JunctionHazard(k, link, foe, ahead)
-                if kind == "give_way" and not link.tls and link.state == "m" and foe.state == "M":
-                    return JunctionHazard(k, link, foe, ahead)
-                if kind == "red_light" and link.direction == "s" and link.tls and foe.tls and foe.direction == "s" \
+                    return JunctionHazard(k, link, c, ahead)
+                merge = foe.to_edge == link.to_edge
+                if kind in ("give_way", "merge") and not link.tls and link.state == "m" and foe.state == "M" \
+                        and merge == (kind == "merge"):
+                    return JunctionHazard(k, link, c, ahead)
+                if kind == "red_light" and link.direction == "s" and link.tls and foe.tls and foe.direction in "sl" \
                         and math.radians(60) < angle < math.radians(120):
-                    return JunctionHazard(k, link, foe, ahead)
+                    return JunctionHazard(k, link, c, ahead)
         ahead += net.junction_length(a, b) + net.edge_length[b]
     return None
 
@@ -362,11 +371,74 @@ def _onwards(net: RoadNetwork, edge: str, min_m: float = 150.0) -> tuple[str, ..
     return tuple(out)
 
 
+class RedLightRunner(Script):
+    """At a light where the ego goes straight, once its light is green and the ego, at its speed, would reach
+    where a perpendicular approach's straight link crosses its own as soon as a car from 70 m before that
+    approach's (red) stop line at 1.4 times its lane's limit, such a car comes: it ignores its red and the
+    right of way (SUMO keeps its car following) and is given back to SUMO's driver past the junction. A
+    lawful driver sees it come, well over its limit, at its red (the privileged scene's ``foe_speeding``)."""
+
+    RUNNER = "sc_runner"
+    SPEED_FACTOR = 1.4
+    FROM_M = 70.0
+
+    def __init__(self, episode, net, rng):
+        super().__init__(episode, net, rng)
+        self.hazard = junction_hazard(net, episode, "red_light")
+        self.phase = "wait"
+
+    def tick(self, sim, ego):
+        from hbmp_bench.sim.sumo import SCENARIO_TYPE
+
+        if ego is None or self.hazard is None or self.phase in ("gone", "missed"):
+            return
+        net, link, conflict = self.net, self.hazard.link, self.hazard.conflict
+        foe = conflict.foe
+        if self.phase == "wait":
+            to_line = _to_junction_m(net, self.episode, self.hazard, ego)
+            if to_line < 0.0:
+                self.phase = "missed"
+                self.log(sim, "the ego passed the junction first")
+                return
+            if sim.light_state(link.tls, link.link_index) not in "gG":
+                return
+            eta = (to_line + conflict.at_m) / max(ego.speed, 1.0)
+            lane = net.lane(foe.from_lane)
+            speed = self.SPEED_FACTOR * lane.speed
+            from_m = min(self.FROM_M, lane.length - 5.0)
+            if eta > (from_m + conflict.foe_at_m) / speed:
+                return
+            from_m = max(min(from_m, speed * eta - conflict.foe_at_m), 15.0)
+            sim.add_vehicle(self.RUNNER, (foe.from_edge, foe.to_edge, *_onwards(net, foe.to_edge)),
+                            lane_index=lane.index, pos=lane.length - from_m, speed=speed, vtype=SCENARIO_TYPE)
+            sim.run_red_lights(self.RUNNER)
+            sim.track_lane(self.RUNNER)
+            sim.set_speed(self.RUNNER, speed)
+            self.phase = "running"
+            self.log(sim, f"runs its {sim.light_state(foe.tls, foe.link_index)!r} light from {from_m:.0f} m at "
+                          f"{speed:.1f} m/s; the ego {to_line:.1f} m from its green at {ego.speed:.1f} m/s")
+        elif self.phase == "running":
+            runner = sim.vehicle_state(self.RUNNER)
+            if runner is not None and not runner.lane.startswith(":") and net.lane(runner.lane).edge != foe.from_edge:
+                sim.give_back(self.RUNNER)
+                self.phase = "gone"
+                self.log(sim, "past the junction")
+
+
 class UnprotectedLeft(CrossTraffic):
     """The ego turns left at a light while 4-7 oncoming cars go straight through on their green, one
     every 2.5-4 s: it must wait for a gap."""
 
     hazard_kind = "unprotected_left"
+
+
+class Merge(CrossTraffic):
+    """The ego's road merges, without a light, into a road on which 6-9 cars arrive one every 2-3 s:
+    it must find its gap (a motorway on-ramp where the town has one)."""
+
+    hazard_kind = "merge"
+    count_range = (6, 9)
+    headway_range = (2.0, 3.0)
 
 
 class GiveWay(CrossTraffic):
@@ -388,6 +460,8 @@ class ScenarioType:
         fits: whether an episode's route and town can host it.
         script: the :class:`Script` class that sets it up.
         description: one sentence.
+        route_legs: shortest routes chained into one (``suites.sample_chained_episode``); 1: one.
+        density: the background traffic of its episodes (``suites.DENSITIES``), None: the suite's.
     """
 
     name: str
@@ -396,16 +470,29 @@ class ScenarioType:
     fits: Callable[[RoadNetwork, Episode], bool]
     script: type[Script]
     description: str
+    route_legs: int = 1
+    density: str | None = None
 
 
 SCENARIO_TYPES: dict[str, ScenarioType] = {}
 
 
 def register_scenario_type(kind: ScenarioType) -> ScenarioType:
-    if kind.name in SCENARIO_TYPES:
+    """Add a scenario type: a task name of its own (labelled by its name in reports)."""
+    from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS
+
+    if kind.name in SCENARIO_TYPES or kind.name in TASKS:
         raise ValueError(f"scenario type {kind.name!r} is already registered")
     SCENARIO_TYPES[kind.name] = kind
+    TASK_LABELS.setdefault(kind.name, kind.name)
     return kind
+
+
+def all_tasks() -> tuple[str, ...]:
+    """Every task name in report order: the CoRL2017 task categories, then the scenario types."""
+    from hbmp_bench.scenarios.spec import TASKS
+
+    return (*TASKS, *SCENARIO_TYPES)
 
 
 register_scenario_type(ScenarioType(
@@ -432,6 +519,27 @@ register_scenario_type(ScenarioType(
     GiveWay, "An unsignalised junction where the ego yields to cars crossing on the priority road."))
 
 
+register_scenario_type(ScenarioType(
+    "RedLightRunner", "Traffic signs", "Straight",
+    lambda net, ep: junction_hazard(net, ep, "red_light") is not None,
+    RedLightRunner, "A car runs its red across the ego's green, well over its speed limit."))
+register_scenario_type(ScenarioType(
+    "Merge", "Merging", "Navigation",
+    lambda net, ep: junction_hazard(net, ep, "merge") is not None,
+    Merge, "A merge without a light into a road with a dense stream of cars (an on-ramp in Town04)."))
+register_scenario_type(ScenarioType(
+    "LongRoute", "Navigation", "Navigation",
+    lambda net, ep: ep.route_length_m >= 2.0 * _navigation_mean_m(ep.town) and ep.turns >= 3,
+    Script, "A route of several shortest routes chained (twice a Navigation route or more, 3+ turns) in "
+    "regular traffic.", route_legs=4, density="regular"))
+
+
+def _navigation_mean_m(town: str) -> float:
+    from hbmp_bench.scenarios.suites import mean_route_lengths
+
+    return mean_route_lengths(town)[2]
+
+
 def check_scenario_type(name: str) -> ScenarioType:
     from hbmp_bench.errors import UnknownNameError
 
@@ -452,9 +560,13 @@ def script_for(episode: Episode, net: RoadNetwork, entropy: list[int]) -> Script
 
 def scenario_episode(draw: Callable[[np.random.Generator], Episode], kind: ScenarioType, net: RoadNetwork,
                      rng: np.random.Generator, attempts: int = 200) -> Episode:
-    """The first episode ``draw`` gives with ``rng`` whose route fits ``kind``, with the task renamed."""
+    """The first episode ``draw`` gives with ``rng`` whose route fits ``kind``, with the task renamed (a draw
+    that raises ValueError, a route it could not make, is one more attempt)."""
     for _ in range(attempts):
-        episode = draw(rng)
+        try:
+            episode = draw(rng)
+        except ValueError:
+            continue
         if kind.fits(net, episode):
             return dataclasses.replace(episode, task=kind.name)
     raise ValueError(f"no route of {kind.pose_task} fits {kind.name} in {attempts} draws")

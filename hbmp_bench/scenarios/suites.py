@@ -415,6 +415,39 @@ def sample_episode(
     raise ValueError(f"no {task} route near {mean:.0f} m in {town}")
 
 
+def sample_chained_episode(town: str, legs: int, rng: np.random.Generator, *, suite: Suite, index: int, seed: int,
+                           traffic: Traffic) -> Episode:
+    """An episode whose route chains ``legs`` shortest routes (a long route with many junctions): a
+    Navigation episode's start and first leg (:func:`sample_episode`), then from each leg's last edge the
+    shortest route to a random edge of :func:`episode_edges`, no edge driven twice; the goal on the last
+    edge as :func:`sample_episode` places it. ValueError when the chain cannot be made or driven."""
+    net = road_network(town)
+    first = sample_episode(town, "Navigation", rng, suite=suite, index=index, seed=seed, traffic=traffic)
+    route = list(first.route)
+    usable = sorted(episode_edges(town, suite.success_radius_m))
+    for _ in range(legs - 1):
+        dist, prev = net.shortest_tree(route[-1])
+        targets = [e for e in usable if e in dist and e not in route]
+        if not targets:
+            raise ValueError(f"no leg from {route[-1]} in {town}")
+        leg = net.path_to(prev, route[-1], targets[int(rng.integers(len(targets)))])
+        if set(leg[1:]) & set(route):
+            raise ValueError("the chain drives an edge twice")
+        route.extend(leg[1:])
+    route_t = tuple(route)
+    goal_pos = round(float(rng.uniform(0.3, 0.9) * net.edge_length[route_t[-1]]), 2)
+    start_lanes = net.reachable_start_lanes(route_t, first.start_pos, goal_pos)
+    start_lane = start_lanes[int(rng.integers(len(start_lanes)))]
+    goal_lane = net.reachable_goal_lanes(route_t, goal_pos, start_lane, first.start_pos)[0]
+    length = net.route_length(route_t, first.start_pos, goal_pos, start_lane, goal_lane)
+    timeout_s = episode_timeout(suite, town, route_t, length)
+    if not (net.route_drivable(route_t, start_lane, first.start_pos, goal_lane, goal_pos)
+            and lawful_route_time(town, route_t, length) <= timeout_s):
+        raise ValueError("the chained route cannot be driven in time")
+    return dataclasses.replace(first, start_lane=start_lane, goal_lane=goal_lane, goal_pos=goal_pos, route=route_t,
+                               route_length_m=round(length, 2), turns=net.count_turns(route_t), timeout_s=timeout_s)
+
+
 def suite_episodes(suite_name: str, town: str, task: str) -> tuple[Episode, ...]:
     """The deterministic episode list of a suite for one (town, task) (cached per net: see
     :func:`episode_list`)."""
@@ -459,22 +492,36 @@ def episode_list(suite_name: str, town: str, task: str) -> tuple[Episode, ...]:
 
 def _scenario_episodes(suite: Suite, town: str, kind: ScenarioType) -> tuple[Episode, ...]:
     """A scenario type's episodes in a town: episode i draws routes of the type's pose task from its own
-    generator (suite seed, town, type, i) until one fits the type; () where none of its first draws fits
-    (the town cannot host it: a cut-in needs two lanes one way)."""
+    generator (suite seed, town, type, i) until one fits the type. The list ends at the first episode none
+    of whose draws fits (``scenario_episode``'s attempts): () where the town cannot host the type (a cut-in
+    needs two lanes one way), fewer than ``episodes_per_task`` where its places are rare."""
     net = road_network(town)
-    traffic = traffic_for(town, kind.pose_task, suite.density)
+    traffic = traffic_for(town, kind.pose_task, kind.density or suite.density)
     episodes = []
     for i in range(suite.episodes_per_task):
         def draw(rng, i=i):
-            return sample_episode(town, kind.pose_task, rng, suite=suite, index=i,
-                                  seed=_seed(suite.seed, town, kind.name, i) % (2**31), traffic=traffic)
+            seed = _seed(suite.seed, town, kind.name, i) % (2**31)
+            if kind.route_legs > 1:
+                return sample_chained_episode(town, kind.route_legs, rng, suite=suite, index=i, seed=seed,
+                                              traffic=traffic)
+            return sample_episode(town, kind.pose_task, rng, suite=suite, index=i, seed=seed, traffic=traffic)
         try:
             episodes.append(scenario_episode(draw, kind, net, np.random.default_rng(_seed(suite.seed, town, kind.name, i))))
         except ValueError:
-            if i == 0:
-                return ()
-            raise
+            break
     return tuple(episodes)
+
+
+def selection_size(suite_name: str, towns, tasks, indices) -> int:
+    """Episodes a selection of a suite holds: every (town, task, index) but the indices past a scenario
+    type's list in a town that cannot host all of it (``_scenario_episodes``: none where it does not fit);
+    the CoRL2017 tasks have ``episodes_per_task`` in every town."""
+    n = 0
+    for town in towns:
+        for task in tasks:
+            have = len(suite_episodes(suite_name, town, task)) if task in SCENARIO_TYPES else None
+            n += sum(1 for i in indices if have is None or i < have)
+    return n
 
 
 def all_episodes(suite_name: str) -> list[Episode]:
