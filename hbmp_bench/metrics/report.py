@@ -49,7 +49,8 @@ from hbmp_bench.metrics.records import (
     latest_per_key,
     read_records,
 )
-from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS
+from hbmp_bench.scenarios.scenario_types import all_tasks
+from hbmp_bench.scenarios.spec import TASK_LABELS
 from hbmp_bench.vocabulary import COLLISION_KINDS, DETECTED_KINDS, VIOLATION_KINDS
 
 OUTCOMES = ("success", "wrong_lane", "collision", "red_light", "timeout", "left_network", "agent_error")
@@ -180,7 +181,7 @@ def success_table(df: pd.DataFrame) -> pd.DataFrame:
     sets = _sets(df)
     columns = ["town"] if len(sets) == 1 else ["town", "result_set"]
     table = df.pivot_table(index="task", columns=columns, values="success", aggfunc="mean") * 100.0
-    table = table.loc[[t for t in TASKS if t in table.index]].round(1)
+    table = table.loc[[t for t in all_tasks() if t in table.index]].round(1)
     if len(sets) > 1:
         order = [(town, s) for town in _towns(df) for s in sets if (town, s) in table.columns]
         table = table[order]
@@ -272,7 +273,7 @@ def route_length_check(df: pd.DataFrame) -> pd.DataFrame:
     if not rows:
         return pd.DataFrame()
     sets = _sets(df)
-    rows.sort(key=lambda r: (sets.index(r["result_set"]), r["town"], TASKS.index(r["task"])))
+    rows.sort(key=lambda r: (sets.index(r["result_set"]), r["town"], all_tasks().index(r["task"])))
     return pd.DataFrame(rows).set_index(["result_set", "town", "task"])
 
 
@@ -470,7 +471,9 @@ def scores(suite: str, records: Sequence[EpisodeRecord], *, towns: Sequence[str]
     spec = get_suite(suite)
     full = (set(towns) == set(spec.towns) and set(tasks) == set(spec.tasks)
             and list(episodes) == list(range(spec.episodes_per_task)))
-    expected = len(towns) * len(tasks) * len(episodes)
+    from hbmp_bench.scenarios import selection_size
+
+    expected = selection_size(spec.name, towns, tasks, episodes)
     sim_errors = sum(r.end_reason == SIM_ERROR for r in records)
     frame = records_frame(records, label=agent) if records else None
     views = {}
@@ -478,7 +481,7 @@ def scores(suite: str, records: Sequence[EpisodeRecord], *, towns: Sequence[str]
         if aggregates:
             views = {name: view_rows(view) for name, view in build_report(frame).views.items()}
         per_task = scored(frame).groupby("task")["success"].mean() * 100.0
-        views["success_pct_by_task"] = {t: round(float(per_task[t]), 1) for t in TASKS if t in per_task.index}
+        views["success_pct_by_task"] = {t: round(float(per_task[t]), 1) for t in all_tasks() if t in per_task.index}
     scored_records = [r for r in records if r.end_reason not in EXCLUDED]
     summary = summarize(scored_records)
     km = float(sum(r.distance_m for r in scored_records)) / 1000.0
