@@ -16,9 +16,9 @@ Deviations from the paper, and why:
   cost-to-reward mapping open. At scale 1 the dense reward paid for violations: a standing car costs
   c_dist = 1 per decision, so waiting through a red (23-57 s in the towns) cost more than running it
   (r_T = −10) and a violation ends the episode. PPO from il found that: red-light ends per 100 training
-  episodes 42 → 57 → 67, goals 49 → 32 → 29 (``training_runs/hbmp-cont``, scale 1). The drift the anchor
+  episodes 42 → 57 → 67, goals 49 → 32 → 29 (``hbmp-cont`` in ``training_runs/README.md``, scale 1). The drift the anchor
   below was built against is this reward, not only the clip: the same run at scale 0.01
-  (``training_runs/hbmp-scale001``) rose from 57 % to 88 % training success within 200 PPO episodes,
+  (``hbmp-scale001`` in ``training_runs/README.md``) rose from 57 % to 88 % training success within 200 PPO episodes,
   but there standing still was free and the greedy policy stood; 0.25 bounds both ways (see the
   ``reward_scale`` docstring).
 - IL anchor (not in the paper; ``anchor_coef``, default 0): the loss gains ``anchor_coef`` times a KL
@@ -31,7 +31,7 @@ Deviations from the paper, and why:
   (0.95 → 0.76) but gain at most 5 % after a success, so advantage noise alone (1-2 episodes per
   iteration, a ±100 terminal reward) flattens the policy: measured, the entropy rose 0.33 → 0.42 and
   training success fell 49 → 29 % over 200 episodes with the paper's settings
-  (``training_runs/hbmp-cont``). The anchor keeps the policy where the data do not say otherwise; the
+  (``hbmp-cont`` in ``training_runs/README.md``). The anchor keeps the policy where the data do not say otherwise; the
   KL to π_IL is logged per iteration (``kl_init``).
 - Batch size 32 is the mini-batch: each iteration collects ``num_steps_per_env`` decisions in
   each worker and splits them into mini-batches of 32.
@@ -51,7 +51,7 @@ Deviations from the paper, and why:
   in training succeeds in ~55 %: most training failures are exploration the evaluated policy never
   does, and PPO improved the sampled policy while the greedy one wandered (``training_runs/hbmp-rules11``,
   ``hbmp-rev01``). With τ < 1 the roll-outs act closer to the greedy policy, so PPO learns from the
-  failures of the policy that is evaluated. Measured at τ = 0.5 (``training_runs/hbmp-t05``): the sampled
+  failures of the policy that is evaluated. Measured at τ = 0.5 (``hbmp-t05`` in ``training_runs/README.md``): the sampled
   il succeeds in 84 % of the training episodes, and PPO did not raise that in 350 episodes.
 - Critic warm-up (not in the paper): with an IL initialisation the actor starts good and the critic
   random, and PPO's first updates would follow the random critic's advantages away from the IL
