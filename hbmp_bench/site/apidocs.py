@@ -84,14 +84,35 @@ def api_pages() -> dict[str, str]:
     return pages
 
 
+def _nav_pages(items) -> set[str]:
+    found = set()
+    for item in items or []:
+        value = next(iter(item.values())) if isinstance(item, dict) else item
+        found |= _nav_pages(value) if isinstance(value, list) else {value}
+    return found
+
+
+def _title(page: Path) -> str:
+    heading = next((line[2:].strip() for line in page.read_text(encoding="utf-8").splitlines()
+                    if line.startswith("# ")), "")
+    return heading or page.stem.replace("-", " ").capitalize()
+
+
 def on_config(config):
-    """mkdocs hook: the nav's :data:`NAV_TITLE` section lists the generated pages, one per room."""
-    section = [{"Overview": "api/index.md"}, *({f"hbmp_bench.{room}": f"api/{room}.md"} for room in documented_rooms())]
-    for item in config["nav"] or []:
-        if isinstance(item, dict) and NAV_TITLE in item:
-            item[NAV_TITLE] = section
-            return config
-    raise ValueError(f"mkdocs.yml's nav has no {NAV_TITLE!r} section for the generated API pages")
+    """mkdocs hook: the nav's :data:`NAV_TITLE` section lists the generated pages, one per room, and a
+    top-level docs page the nav does not name yet is listed before it (under its first heading), so a
+    page added to ``docs/`` is never left out of the site."""
+    nav = config["nav"] or []
+    at = next((i for i, item in enumerate(nav) if isinstance(item, dict) and NAV_TITLE in item), None)
+    if at is None:
+        raise ValueError(f"mkdocs.yml's nav has no {NAV_TITLE!r} section for the generated API pages")
+    nav[at][NAV_TITLE] = [{"Overview": "api/index.md"},
+                          *({f"hbmp_bench.{room}": f"api/{room}.md"} for room in documented_rooms())]
+    listed = _nav_pages(nav)
+    docs_dir = Path(config["docs_dir"])
+    added = [{_title(page): page.name} for page in sorted(docs_dir.glob("*.md")) if page.name not in listed]
+    nav[at:at] = added
+    return config
 
 
 def on_files(files, config):

@@ -67,3 +67,23 @@ def doc_commands(files=DOC_FILES) -> list[DocCommand]:
                 else:
                     command.append(word)
     return found
+
+
+def python_blocks(files=DOC_FILES) -> list[tuple[Path, int, str]]:
+    """``(file, first line, code)`` of every fenced ``python`` block of ``files``."""
+    blocks = []
+    for path in files:
+        language, start, lines = None, 0, []
+        for number, text in enumerate(path.read_text(encoding="utf-8").splitlines(), start=1):
+            fence = _FENCE.match(text.strip())
+            if fence:
+                if language is None:
+                    language, start, lines = fence.group(1), number + 1, []
+                else:
+                    if language == "python":
+                        blocks.append((path, start, "\n".join(lines)))
+                    language = None
+                continue
+            if language is not None:
+                lines.append(text)
+    return blocks

@@ -7,6 +7,7 @@ from __future__ import annotations
 import contextlib
 import html
 import importlib
+import importlib.util
 import inspect
 import io
 import os
@@ -20,7 +21,7 @@ import pytest
 from hbmp_bench.cli import build_parser, main
 from hbmp_bench.site.apidocs import documented_rooms, room_modules
 
-from docs_commands import ROOT, DocCommand, doc_commands
+from docs_commands import ROOT, DocCommand, doc_commands, python_blocks
 
 API_PACKAGES = ("envs", "agents", "evaluation", "training")
 """The rooms whose every public class and function the API reference must show with its docstring."""
@@ -41,9 +42,10 @@ def test_readme_links_resolve():
     assert len(links) >= 11, links  # one per docs page at least
     missing = [link for link in links if "://" not in link and not (ROOT / link).exists()]
     assert not missing, f"README links to missing files: {missing}"
-    pages = {p.name for p in (ROOT / "docs").glob("*.md")}
+    nav = re.findall(r":\s*([\w-]+\.md)\s*$", (ROOT / "mkdocs.yml").read_text(encoding="utf-8"), flags=re.M)
+    pages = {name for name in nav if (ROOT / "docs" / name).is_file()} - {"index.md"}
     linked = {Path(link).name for link in links if link.startswith("docs/")}
-    assert pages - {"index.md"} <= linked, f"docs pages the README does not link: {sorted(pages - linked - {'index.md'})}"
+    assert len(pages) >= 12 and pages <= linked, f"docs pages of the nav the README does not link: {sorted(pages - linked)}"
 
 
 @pytest.fixture(scope="module")
@@ -162,3 +164,30 @@ def test_cheap_docs_command_runs(command: DocCommand, tmp_path, monkeypatch, cap
 
 def test_cheap_commands_include_the_reports():
     assert sum(c.argv[0] == "report" for c in CHEAP) >= 6 and any(c.argv == ("list",) for c in CHEAP)
+
+
+PYTHON_BLOCKS = python_blocks()
+
+
+@pytest.mark.parametrize("block", PYTHON_BLOCKS, ids=lambda b: f"{b[0].relative_to(ROOT)}:{b[1]}")
+def test_docs_python_blocks_compile_and_import_what_exists(block):
+    """Each python block of the docs is valid Python, and every name it imports from the package exists."""
+    import ast
+
+    path, line, code = block
+    tree = ast.parse(code, filename=f"{path.name}:{line}")
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("hbmp_bench"):
+            module = importlib.import_module(node.module)
+            for alias in node.names:
+                if not hasattr(module, alias.name):  # ``from package import submodule``
+                    assert importlib.util.find_spec(f"{node.module}.{alias.name}") is not None, (
+                        f"{path.name}:{line}: {node.module} has no {alias.name}")
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("hbmp_bench"):
+                    importlib.import_module(alias.name)
+
+
+def test_docs_have_python_blocks():
+    assert len(PYTHON_BLOCKS) >= 4 and any(p.name == "README.md" for p, _, _ in PYTHON_BLOCKS)
