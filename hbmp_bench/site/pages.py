@@ -409,7 +409,8 @@ def agent_page(agent: str, card: AgentCard | None, curves: str | None, boards: S
     parts += ["<h2>Failed episodes</h2>\n",
               f'<p class="note">The first {FAILURES_PER_ENTRY} failed episodes of each entry (town, task, episode '
               'order) and the command that replays one as a top-down GIF: episodes are deterministic given their '
-              'seed.</p>\n', filters("failures", {}, text=True),
+              'seed. An episode on an imported town (CARLA\'s) replays once the map is imported under that name '
+              '(<code>hbmp-bench maps import</code>).</p>\n', filters("failures", {}, text=True),
               table("failures", ["board", "fidelity", "town", "task", "episode", "seed", "end", "route completion %",
                                  "replay"], failure_rows)]
     return page(f"Agent {agent}", "".join(parts), boards, agents)
