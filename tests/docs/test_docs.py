@@ -191,3 +191,21 @@ def test_docs_python_blocks_compile_and_import_what_exists(block):
 
 def test_docs_have_python_blocks():
     assert len(PYTHON_BLOCKS) >= 4 and any(p.name == "README.md" for p, _, _ in PYTHON_BLOCKS)
+
+
+def test_repository_paths_named_in_the_docs_exist():
+    """A folder or file of the repository the README or a docs page names in backticks is there (a run
+    removed from training_runs/ or a moved module shows up here); env ids and placeholders are no paths."""
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    named, missing = 0, []
+    for page in pages:
+        text = page.read_text(encoding="utf-8")
+        for match in re.finditer(r"`((?:training_runs|leaderboards|hbmp_bench|docs|benchmarks)/[^`\s]*)`", text):
+            path = match.group(1).rstrip(".,;:)")
+            if re.search(r"[<>*{}|]|[A-Z]{3,}|-v\d+$", path):
+                continue
+            named += 1
+            if not (ROOT / path).exists():
+                missing.append(f"{page.relative_to(ROOT)}: {path}")
+    assert named > 50, named
+    assert not missing, missing
