@@ -132,125 +132,71 @@ class Lane:
 
 
 class RoadNetwork:
-    """Drivable lane graph of one SUMO net.
+    """Drivable lane graph of one SUMO net: the tables its readers read (:meth:`from_sumo`), and the
+    graph, routes and lane geometry derived from them.
+
+    Build one with ``RoadNetwork.from_sumo(path)`` (or the cached :func:`load_road_network`); the
+    constructor takes the tables as they are.
 
     Args:
-        net_path: a SUMO ``.net.xml``.
+        path: the ``.net.xml`` the tables were read from (its name appears in messages).
+        lanes: drivable lanes of normal edges by id, in the net's edge order.
+        internal_lanes: drivable junction (internal) lanes by id.
+        edge_lanes: normal edge -> its drivable lane ids, SUMO index order.
+        edge_from_to: normal edge -> (from node, to node).
+        connections: normal edge -> every drivable link leaving it (:func:`read_connections`).
+        lane_next: lane -> (next lane or junction lane, the normal edge it leads onto) per link.
+        junction_shapes: node -> its polygon (N, 2) [m] (nodes with three or more shape points).
+        walkable_edges: where pedestrians are spawned (:func:`read_walkable_edges`).
+        tls_ids: traffic light ids, sorted.
+        crossings: pedestrian crossings by edge id.
     """
 
-    def __init__(self, net_path: str | Path):
-        import sumolib
-
-        self.path = Path(net_path)
+    def __init__(self, path: str | Path, *, lanes: dict[str, Lane], internal_lanes: dict[str, Lane],
+                 edge_lanes: dict[str, tuple[str, ...]], edge_from_to: dict[str, tuple[str, str]],
+                 connections: dict[str, tuple[Connection, ...]], lane_next: dict[str, tuple[tuple[str, str], ...]],
+                 junction_shapes: dict[str, np.ndarray], walkable_edges: tuple[str, ...], tls_ids: tuple[str, ...],
+                 crossings: dict[str, Crossing]):
+        self.path = Path(path)
         self._trees: dict[str, tuple[Mapping[str, float], Mapping[str, str]]] = {}
-        net = sumolib.net.readNet(str(self.path), withInternal=True, withPedestrianConnections=False)
-        self.lanes: dict[str, Lane] = {}
-        self.edge_lanes: dict[str, tuple[str, ...]] = {}
-        self.internal_lanes: dict[str, Lane] = {}
-        self.edge_from_to: dict[str, tuple[str, str]] = {}
-        self.junction_shapes: dict[str, np.ndarray] = {}
-        self.walkable_edges: tuple[str, ...] = tuple(
-            sorted(
-                e.getID()
-                for e in net.getEdges(withInternal=False)
-                if e.getFunction() == "" and any(ln.allows("pedestrian") for ln in e.getLanes())
-                and any(ln.allows("passenger") for ln in e.getLanes()) and e.getLength() > WALK_SPAWN_MIN_M
-            )
-        )
+        self.lanes = lanes
+        self.edge_lanes = edge_lanes
+        self.internal_lanes = internal_lanes
+        self.edge_from_to = edge_from_to
+        self.junction_shapes = junction_shapes
+        self.walkable_edges = walkable_edges
         """Road edges (with a drivable lane, so in ``edge_length``) beside a walkable lane, longer than
         ``WALK_SPAWN_MIN_M``: where pedestrians are spawned. A footpath of an imported map (no drivable
         lane) or a sliver edge is walked, not spawned on."""
-        for edge in net.getEdges(withInternal=True):
-            drivable = [ln for ln in edge.getLanes() if ln.allows("passenger")]
-            if not drivable:
-                continue
-            lanes = [
-                Lane(
-                    id=ln.getID(),
-                    edge=edge.getID(),
-                    index=ln.getIndex(),
-                    shape=np.asarray(ln.getShape(), dtype=float)[:, :2],
-                    length=float(ln.getLength()),
-                    width=float(ln.getWidth()),
-                    speed=float(ln.getSpeed()),
-                )
-                for ln in drivable
-            ]
-            if edge.getFunction() == "internal":
-                for lane in lanes:
-                    self.internal_lanes[lane.id] = lane
-                continue
-            for lane in lanes:
-                self.lanes[lane.id] = lane
-            self.edge_lanes[edge.getID()] = tuple(lane.id for lane in lanes)
-            self.edge_from_to[edge.getID()] = (edge.getFromNode().getID(), edge.getToNode().getID())
-        self.connections: dict[str, tuple[Connection, ...]] = {}
-        for edge_id in self.edge_lanes:
-            edge = net.getEdge(edge_id)
-            conns = []
-            for to_edge, links in edge.getOutgoing().items():
-                if to_edge.getID() not in self.edge_lanes:
-                    continue
-                for c in links:
-                    if c.getFromLane().getID() not in self.lanes or c.getToLane().getID() not in self.lanes:
-                        continue
-                    conns.append(
-                        Connection(
-                            from_edge=edge_id,
-                            from_lane=c.getFromLane().getID(),
-                            to_edge=to_edge.getID(),
-                            to_lane=c.getToLane().getID(),
-                            via=c.getViaLaneID() or "",
-                            direction=c.getDirection(),
-                            tls=c.getTLSID() or "",
-                            link_index=int(c.getTLLinkIndex()),
-                            state=c.getState() or "M",
-                        )
-                    )
-            self.connections[edge_id] = tuple(conns)
+        self.connections = connections
         self._link_end = {c.via: c.to_lane for conns in self.connections.values() for c in conns if c.via}
         """The lane a link leads onto, by the link's first junction lane."""
-        self.lane_next: dict[str, tuple[tuple[str, str], ...]] = {}
-        for lane_id in list(self.lanes) + list(self.internal_lanes):
-            nxt = []
-            for c in net.getLane(lane_id).getOutgoing():
-                to_lane = c.getToLane().getID()
-                if to_lane not in self.lanes and to_lane not in self.internal_lanes:
-                    continue
-                step = c.getViaLaneID() or to_lane
-                nxt.append((step, self._final_edge(net, step)))
-            self.lane_next[lane_id] = tuple(nxt)
-        for node in net.getNodes():
-            shape = node.getShape()
-            if len(shape) >= 3:
-                self.junction_shapes[node.getID()] = np.asarray(shape, dtype=float)[:, :2]
+        self.lane_next = lane_next
         pairs = {v: k for k, v in self.edge_from_to.items()}
         self.opposite: dict[str, str | None] = {
             e: pairs.get((t, f)) for e, (f, t) in self.edge_from_to.items()
         }
         self.edge_length = {e: self.lanes[ids[0]].length for e, ids in self.edge_lanes.items()}
         self.drivable_edges: tuple[str, ...] = tuple(sorted(self.edge_lanes))
-        self.tls_ids: tuple[str, ...] = tuple(sorted(t.getID() for t in net.getTrafficLights()))
-        signals = _crossing_signals(self.path)
-        self.crossings: dict[str, Crossing] = {}
+        self.tls_ids = tls_ids
+        self.crossings = crossings
         """Pedestrian crossings by edge id."""
-        for edge in net.getEdges(withInternal=True):
-            if edge.getFunction() != "crossing" or not edge.getLanes():
-                continue
-            lane = edge.getLanes()[0]
-            ends = tuple(e.getID() for e in (*edge.getIncoming(), *edge.getOutgoing()))
-            tls, index = signals.get(edge.getID(), ("", -1))
-            self.crossings[edge.getID()] = Crossing(edge.getID(), np.asarray(lane.getShape(), dtype=float)[:, :2],
-                                                    float(lane.getWidth()), ends, tls, index)
 
-    def _final_edge(self, net, lane_id: str) -> str:
-        """The normal edge a (possibly internal) lane leads onto."""
-        while lane_id in self.internal_lanes:
-            outgoing = net.getLane(lane_id).getOutgoing()
-            if not outgoing:
-                return ""
-            lane_id = outgoing[0].getViaLaneID() or outgoing[0].getToLane().getID()
-        return self.lanes[lane_id].edge if lane_id in self.lanes else ""
+    @classmethod
+    def from_sumo(cls, net_path: str | Path) -> RoadNetwork:
+        """Read a SUMO ``.net.xml`` with sumolib (junction lanes included, pedestrian links not) through the
+        small readers of this module."""
+        import sumolib
+
+        path = Path(net_path)
+        net = sumolib.net.readNet(str(path), withInternal=True, withPedestrianConnections=False)
+        lanes, internal_lanes, edge_lanes, edge_from_to = read_lanes(net)
+        return cls(path, lanes=lanes, internal_lanes=internal_lanes, edge_lanes=edge_lanes, edge_from_to=edge_from_to,
+                   connections=read_connections(net, lanes, edge_lanes),
+                   lane_next=read_lane_next(net, lanes, internal_lanes), junction_shapes=read_junction_shapes(net),
+                   walkable_edges=read_walkable_edges(net),
+                   tls_ids=tuple(sorted(t.getID() for t in net.getTrafficLights())),
+                   crossings=read_crossings(net, path))
 
     # ---------------------------------------------------------------- graph
     # ``connections`` holds every link of the net (foes, stop lines); routes and the lanes a car
@@ -731,6 +677,101 @@ class RoutePath:
         return float(np.clip(at, lo, hi))
 
 
+# ---------------------------------------------------------------- readers (a sumolib net -> tables)
+def _lane(ln, edge_id: str) -> Lane:
+    return Lane(id=ln.getID(), edge=edge_id, index=ln.getIndex(), shape=np.asarray(ln.getShape(), dtype=float)[:, :2],
+                length=float(ln.getLength()), width=float(ln.getWidth()), speed=float(ln.getSpeed()))
+
+
+def read_lanes(net) -> tuple[dict[str, Lane], dict[str, Lane], dict[str, tuple[str, ...]], dict[str, tuple[str, str]]]:
+    """The drivable lanes (those allowing ``passenger``) of a sumolib net: (lanes of normal edges,
+    junction lanes, edge -> its lane ids, edge -> (from node, to node)); edges without a drivable lane
+    are left out."""
+    lanes: dict[str, Lane] = {}
+    internal: dict[str, Lane] = {}
+    edge_lanes: dict[str, tuple[str, ...]] = {}
+    edge_from_to: dict[str, tuple[str, str]] = {}
+    for edge in net.getEdges(withInternal=True):
+        drivable = [_lane(ln, edge.getID()) for ln in edge.getLanes() if ln.allows("passenger")]
+        if not drivable:
+            continue
+        if edge.getFunction() == "internal":
+            internal.update((lane.id, lane) for lane in drivable)
+            continue
+        lanes.update((lane.id, lane) for lane in drivable)
+        edge_lanes[edge.getID()] = tuple(lane.id for lane in drivable)
+        edge_from_to[edge.getID()] = (edge.getFromNode().getID(), edge.getToNode().getID())
+    return lanes, internal, edge_lanes, edge_from_to
+
+
+def read_walkable_edges(net) -> tuple[str, ...]:
+    """Road edges with a drivable and a walkable lane, longer than ``WALK_SPAWN_MIN_M``, sorted."""
+    return tuple(sorted(
+        e.getID() for e in net.getEdges(withInternal=False)
+        if e.getFunction() == "" and any(ln.allows("pedestrian") for ln in e.getLanes())
+        and any(ln.allows("passenger") for ln in e.getLanes()) and e.getLength() > WALK_SPAWN_MIN_M))
+
+
+def read_connections(net, lanes: Mapping[str, Lane], edge_lanes: Mapping[str, tuple[str, ...]]
+                     ) -> dict[str, tuple[Connection, ...]]:
+    """Every link from a drivable lane to a drivable lane, by the normal edge it leaves."""
+    connections: dict[str, tuple[Connection, ...]] = {}
+    for edge_id in edge_lanes:
+        links = []
+        for to_edge, conns in net.getEdge(edge_id).getOutgoing().items():
+            if to_edge.getID() not in edge_lanes:
+                continue
+            links += [Connection(from_edge=edge_id, from_lane=c.getFromLane().getID(), to_edge=to_edge.getID(),
+                                 to_lane=c.getToLane().getID(), via=c.getViaLaneID() or "", direction=c.getDirection(),
+                                 tls=c.getTLSID() or "", link_index=int(c.getTLLinkIndex()), state=c.getState() or "M")
+                      for c in conns if c.getFromLane().getID() in lanes and c.getToLane().getID() in lanes]
+        connections[edge_id] = tuple(links)
+    return connections
+
+
+def _final_edge(net, lane_id: str, lanes: Mapping[str, Lane], internal: Mapping[str, Lane]) -> str:
+    """The normal edge a (possibly internal) lane leads onto ("" where its junction lanes end)."""
+    while lane_id in internal:
+        outgoing = net.getLane(lane_id).getOutgoing()
+        if not outgoing:
+            return ""
+        lane_id = outgoing[0].getViaLaneID() or outgoing[0].getToLane().getID()
+    return lanes[lane_id].edge if lane_id in lanes else ""
+
+
+def read_lane_next(net, lanes: Mapping[str, Lane], internal: Mapping[str, Lane]
+                   ) -> dict[str, tuple[tuple[str, str], ...]]:
+    """Lane (normal or junction) -> per link to a drivable lane: (the next lane, its first junction lane where
+    it has one; the normal edge that leads onto)."""
+    lane_next: dict[str, tuple[tuple[str, str], ...]] = {}
+    for lane_id in [*lanes, *internal]:
+        steps = [c.getViaLaneID() or c.getToLane().getID() for c in net.getLane(lane_id).getOutgoing()
+                 if c.getToLane().getID() in lanes or c.getToLane().getID() in internal]
+        lane_next[lane_id] = tuple((step, _final_edge(net, step, lanes, internal)) for step in steps)
+    return lane_next
+
+
+def read_junction_shapes(net) -> dict[str, np.ndarray]:
+    """Node -> its polygon (N, 2) [m], for nodes whose shape has three or more points."""
+    return {node.getID(): np.asarray(node.getShape(), dtype=float)[:, :2]
+            for node in net.getNodes() if len(node.getShape()) >= 3}
+
+
+def read_crossings(net, net_path: Path) -> dict[str, Crossing]:
+    """Pedestrian crossings by edge id, with the signal of each (:func:`_crossing_signals`)."""
+    signals = _crossing_signals(net_path)
+    crossings: dict[str, Crossing] = {}
+    for edge in net.getEdges(withInternal=True):
+        if edge.getFunction() != "crossing" or not edge.getLanes():
+            continue
+        lane = edge.getLanes()[0]
+        ends = tuple(e.getID() for e in (*edge.getIncoming(), *edge.getOutgoing()))
+        tls, index = signals.get(edge.getID(), ("", -1))
+        crossings[edge.getID()] = Crossing(edge.getID(), np.asarray(lane.getShape(), dtype=float)[:, :2],
+                                           float(lane.getWidth()), ends, tls, index)
+    return crossings
+
+
 def _crossing_signals(net_path: Path) -> dict[str, tuple[str, int]]:
     """Crossing edge id -> (traffic light, link index) of its pedestrian signal, read off the net
     file's connections onto crossings (sumolib skips them unless it reads every pedestrian link)."""
@@ -822,4 +863,4 @@ def point_along(shape: np.ndarray, pos: float) -> np.ndarray:
 @functools.lru_cache(maxsize=16)
 def load_road_network(net_path: str) -> RoadNetwork:
     """The (process-wide cached) RoadNetwork of a net file."""
-    return RoadNetwork(net_path)
+    return RoadNetwork.from_sumo(net_path)

@@ -38,7 +38,7 @@ def fan_net(tmp_path_factory):
     (d / "f.con.xml").write_text(f"<connections>{links}</connections>")
     run_netconvert(["-n", "f.nod.xml", "-e", "f.edg.xml", "-x", "f.con.xml", "-o", "f.net.xml",
                     "--no-turnarounds", "true"], cwd=d)
-    return RoadNetwork(d / "f.net.xml")
+    return RoadNetwork.from_sumo(d / "f.net.xml")
 
 
 def _end_lane(net, path) -> str:

@@ -63,7 +63,7 @@ def _check_permissions(path, types: tuple[str, ...]) -> None:
         elif kind:
             assert not allows(lane, "passenger"), (kind, lane.attrib)
             assert not allows(lane, "pedestrian"), (kind, lane.attrib)
-    net = RoadNetwork(path)
+    net = RoadNetwork.from_sumo(path)
     types_by_id = {ln.get("id"): kind for kind, ln in lanes}
     assert net.lanes and all(types_by_id[lane] in CAR_LANE_TYPES for lane in net.lanes)
 

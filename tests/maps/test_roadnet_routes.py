@@ -118,7 +118,7 @@ def test_shortest_trees_are_computed_once_read_only_and_pickle():
     assert net.shortest_tree(source)[0] is dist
     with pytest.raises(TypeError):
         dist[source] = 1.0
-    fresh = RoadNetwork(net_path("Town01"))._dijkstra(source)
+    fresh = RoadNetwork.from_sumo(net_path("Town01"))._dijkstra(source)
     assert (dict(dist), dict(prev)) == fresh
     copy = pickle.loads(pickle.dumps(net))
     assert dict(copy.shortest_tree(source)[0]) == dict(dist)
@@ -232,7 +232,7 @@ def _split_then_turn_net(tmp_path) -> RoadNetwork:
         '<connection from="short" to="left" fromLane="1" toLane="0"/>'
         '<connection from="short" to="on" fromLane="0" toLane="0"/></connections>', encoding="utf-8")
     run_netconvert(["-n", "n.nod.xml", "-e", "n.edg.xml", "-x", "n.con.xml", "-o", "n.net.xml"], cwd=tmp_path)
-    return RoadNetwork(tmp_path / "n.net.xml")
+    return RoadNetwork.from_sumo(tmp_path / "n.net.xml")
 
 
 def test_route_drivable_needs_room_to_reach_the_turn_lane(tmp_path):
