@@ -48,7 +48,7 @@ from hbmp_bench.metrics.records import DRIVING_SCORE_DEFINITION, EpisodeRecord
 from hbmp_bench.metrics.report import scores
 from hbmp_bench.metrics.results_file import (  # noqa: F401  (StaleResultsError, results_records: the board's names too)
     EPISODE_COLUMNS, RESULTS_FORMAT, ForgedResultsError, StaleResultsError, check_name, check_results, results_records)
-from hbmp_bench.scenarios import TASK_LABELS, TASKS, get_suite
+from hbmp_bench.scenarios import TASK_LABELS, get_suite
 
 def entry_path(board_dir: str | os.PathLike, suite: str, agent: str, subset: bool, fidelity: str) -> Path:
     """``<board>/<suite>/<agent slug>.<fidelity>.json`` (``.subset.json`` for partial runs): one
@@ -181,14 +181,15 @@ def _suite_episodes(suite: str) -> int:
     return selection_size(spec.name, spec.towns, spec.tasks, range(spec.episodes_per_task))
 
 
-def _row(doc: dict, rank: str) -> list[str]:
+def _row(doc: dict, rank: str, tasks: Sequence[str]) -> list[str]:
     s, prov = doc["summary"], doc["provenance"]
     by_task = doc["aggregates"].get("success_pct_by_task", {})
     km = s.get("km_per_infraction")
+    lb2 = [f"{_mean_driving_score_lb2(doc):.1f}"] if _shows_lb2(tasks) else []
     return [
         rank, f"`{doc['agent']}`", "yes" if doc["privileged"] else "no", f"{s.get('success_pct', 0.0):.1f}",
-        *(f"{by_task[t]:.1f}" if t in by_task else "–" for t in TASKS),
-        f"{s.get('mean_driving_score', 0.0):.1f}", f"{100.0 * s.get('mean_route_completion', 0.0):.1f}",
+        *(f"{by_task[t]:.1f}" if t in by_task else "–" for t in tasks),
+        f"{s.get('mean_driving_score', 0.0):.1f}", *lb2, f"{100.0 * s.get('mean_route_completion', 0.0):.1f}",
         NO_INFRACTION if km is None else f"{km:.2f}", f"{s.get('episodes', 0)} of {_suite_episodes(doc['suite'])}",
         str(doc.get("sim_errors", 0)),
         prov.get("package_version") or "", (prov.get("git_commit") or "")[:10],
@@ -213,13 +214,40 @@ def _weights(doc: dict) -> str:
 NO_INFRACTION = "no infraction"
 """km / infraction of an entry without any infraction event."""
 
-HEADER = ["rank", "agent", "privileged", "success %", *(TASK_LABELS[t] + " %" for t in TASKS), "driving score",
-          "route completion %", "km / infraction", "episodes", "sim errors", "version", "commit", "weights", "date",
-          "wall s", "salted"]
+def _shows_lb2(tasks: Sequence[str]) -> bool:
+    """Whether a board of these tasks shows the Leaderboard 2.0 driving score too (the scenario suites')."""
+    from hbmp_bench.scenarios import SCENARIO_TYPES
+
+    return any(t in SCENARIO_TYPES for t in tasks)
 
 
-def _table(rows: Iterable[list[str]]) -> str:
-    lines = ["| " + " | ".join(HEADER) + " |", "|" + "|".join("---" for _ in HEADER) + "|"]
+def _mean_driving_score_lb2(doc: dict) -> float:
+    """Mean Leaderboard 2.0 driving score (``metrics.records.driving_score_lb2``) of an entry's scored episodes."""
+    from hbmp_bench.metrics.records import record_driving_score_lb2
+    from hbmp_bench.metrics.report import EXCLUDED
+
+    scores_ = [record_driving_score_lb2(r) for r in doc["episodes"] if r["end_reason"] not in EXCLUDED]
+    return sum(scores_) / len(scores_) if scores_ else 0.0
+
+
+def _lb2_sentence(tasks: Sequence[str]) -> str:
+    from hbmp_bench.metrics.records import DRIVING_SCORE_LB2_DEFINITION
+
+    return f"; and the {DRIVING_SCORE_LB2_DEFINITION}" if _shows_lb2(tasks) else ""
+
+
+def header(tasks: Sequence[str]) -> list[str]:
+    """The columns of a board of these tasks (its suite's): a success column per task, the Leaderboard 1.0
+    driving score and, on a scenario suite's board, the Leaderboard 2.0 one."""
+    lb2 = ["driving score (LB 2.0)"] if _shows_lb2(tasks) else []
+    return ["rank", "agent", "privileged", "success %", *(TASK_LABELS[t] + " %" for t in tasks),
+            "driving score (LB 1.0)", *lb2, "route completion %", "km / infraction", "episodes", "sim errors", "version",
+            "commit", "weights", "date", "wall s", "salted"]
+
+
+def _table(rows: Iterable[list[str]], tasks: Sequence[str]) -> str:
+    columns = header(tasks)
+    lines = ["| " + " | ".join(columns) + " |", "|" + "|".join("---" for _ in columns) + "|"]
     lines += ["| " + " | ".join(r) + " |" for r in rows]
     return "\n".join(lines) + "\n"
 
@@ -237,7 +265,7 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
         f"{spec.episodes_per_task} episodes. Generated from the `*.json` results files by "
         f"`hbmp-bench leaderboard render --suite {spec.name}`; do not edit by hand. Complete entries are ranked by "
         f"success % (episodes that reached the goal), then driving score: the mean over episodes of the "
-        f"{DRIVING_SCORE_DEFINITION}. km / infraction: km driven per infraction event (collisions, wrong lane, "
+        f"{DRIVING_SCORE_DEFINITION}{_lb2_sentence(spec.tasks)}. km / infraction: km driven per infraction event (collisions, wrong lane, "
         "off-road and red lights; an episode can have several); episodes: scored of the whole suite's; wall s is the "
         "submission's wall time with its `workers` (see each results file); weights: the first digits of the sha256 of "
         "the checkpoint a learned agent ran (`provenance.agent_fingerprint`), – for an agent without one. Agent errors "
@@ -253,13 +281,13 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
     for fidelity in sorted({e["fidelity"] for e in ranked}):
         group = sorted((e for e in ranked if e["fidelity"] == fidelity), key=_rank_key)
         parts.append(f"## Fidelity: {fidelity}\n")
-        parts.append(_table(_row(e, str(k)) for k, e in enumerate(group, start=1)))
+        parts.append(_table((_row(e, str(k), spec.tasks) for k, e in enumerate(group, start=1)), spec.tasks))
     if partial:
         parts.append("## Partial runs (not ranked)\n")
         parts.append("Runs with missing episodes or sim errors, then subsets of the suite, listed by the episodes "
                      "they cover (most first), not by score: their figures are over their own episodes only and do "
                      "not compare with the ranked entries.\n")
-        parts.append(_table(_row(e, "–") for e in sorted(partial, key=_partial_key)))
+        parts.append(_table((_row(e, "–", spec.tasks) for e in sorted(partial, key=_partial_key)), spec.tasks))
     path = Path(board_dir) / spec.name / "README.md"
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(path.name + ".tmp")

@@ -17,6 +17,40 @@ PENALTIES = {
 }
 """CARLA Leaderboard 1.0 infraction penalty factors (multiplied once per event)."""
 
+PENALTIES_LB2 = {
+    "collision_pedestrian": 0.50,
+    "collision_vehicle": 0.60,
+    "collision_other": 0.65,
+    "red_light": 0.70,
+    "timeout": 0.70,
+}
+"""CARLA Leaderboard 2.0 infraction penalty factors (once per event): its pedestrian, vehicle and static
+collisions and red lights; ``timeout`` is its scenario timeout (an episode of the scenario suites is one
+scenario: a timeout is being blocked in it). Its stop-sign (0.8) and emergency-vehicle (0.7) penalties
+have no event here: no town has stop signs, no scenario type an emergency vehicle."""
+
+DRIVING_SCORE_LB2_DEFINITION = (
+    "driving score LB 2.0 (0-100) = route completion % x the product of "
+    + ", ".join(f"{factor:g} per {kind.replace('_', ' ')}" for kind, factor in PENALTIES_LB2.items())
+    + " (CARLA Leaderboard 2.0)")
+
+
+def driving_score_lb2(route_completion: float, counts: dict[str, int]) -> float:
+    """CARLA Leaderboard 2.0 driving score [0, 100] of an episode: completion % × the product of
+    :data:`PENALTIES_LB2` (``counts``: events per kind; ``timeout`` 0 or 1)."""
+    penalty = 1.0
+    for kind, factor in PENALTIES_LB2.items():
+        penalty *= factor ** int(counts.get(kind, 0))
+    return 100.0 * route_completion * penalty
+
+
+def record_driving_score_lb2(row) -> float:
+    """:func:`driving_score_lb2` of an episode record, or of a row with its fields (a results file's
+    episode, a report frame's row): ``route_completion``, the collision and red-light counts, ``timeout``."""
+    counts = {kind: row[kind] for kind in PENALTIES_LB2 if kind != "timeout"}
+    return driving_score_lb2(row["route_completion"], {**counts, "timeout": int(bool(row["timeout"]))})
+
+
 DRIVING_SCORE_DEFINITION = (
     "driving score (0-100) = route completion % x infraction penalty, the product of "
     + ", ".join(f"{factor:g} per {kind.replace('_', ' ')}" for kind, factor in PENALTIES.items())

@@ -44,10 +44,12 @@ from hbmp_bench.metrics.records import (
     AGENT_ERROR,
     DECISION_CAP,
     DRIVING_SCORE_DEFINITION,
+    DRIVING_SCORE_LB2_DEFINITION,
     SIM_ERROR,
     EpisodeRecord,
     latest_per_key,
     read_records,
+    record_driving_score_lb2,
 )
 from hbmp_bench.scenarios.scenario_types import all_tasks
 from hbmp_bench.scenarios.spec import TASK_LABELS
@@ -84,6 +86,11 @@ VIEW_LEGENDS: dict[str, str] = {
               "reached the goal; diff_pp = success % first - second; p_mcnemar = exact two-sided McNemar test on "
               "those discordant episodes (small: the gap is more than the luck of these episodes; it says "
               "nothing of training seeds).",
+    "scenarios": "Per scenario type (its ability in brackets): episodes, success %, mean "
+                 + DRIVING_SCORE_LB2_DEFINITION + ", the Leaderboard 1.0 driving score of the other tables, route "
+                 "completion %; only for results that hold scenario types.",
+    "abilities": "Success % per ability: the episodes of its scenario types together (Bench2Drive's grouping); "
+                 "only for results that hold scenario types.",
 }
 """One-line meaning and units of each view of :func:`build_report`, printed above it."""
 
@@ -343,10 +350,50 @@ class Report:
         return self.views[name]
 
 
+def scenario_table(df: pd.DataFrame) -> pd.DataFrame:
+    """Per (result_set, scenario type): ability, episodes, success %, mean Leaderboard 2.0 driving score
+    (:func:`~hbmp_bench.metrics.records.driving_score_lb2`), mean Leaderboard 1.0 driving score, route
+    completion %. Empty when ``df`` holds no scenario type."""
+    from hbmp_bench.scenarios import SCENARIO_TYPES
+
+    part = scored(df[df["task"].isin(list(SCENARIO_TYPES))])
+    rows = []
+    for result_set in _sets(part):
+        mine = part[part["result_set"] == result_set]
+        for task in [t for t in SCENARIO_TYPES if t in set(mine["task"])]:
+            group = mine[mine["task"] == task]
+            lb2 = [record_driving_score_lb2(r) for r in group.to_dict(orient="records")]
+            rows.append({
+                "result_set": result_set, "task": task, "ability": SCENARIO_TYPES[task].ability, "episodes": len(group),
+                "success_pct": round(100.0 * float(group["success"].mean()), 1),
+                "driving_score_lb2": round(sum(lb2) / len(lb2), 2),
+                "driving_score": round(float(group["driving_score"].mean()), 2),
+                "route_completion_pct": round(100.0 * float(group["route_completion"].mean()), 1),
+            })
+    columns = ["result_set", "task", "ability", "episodes", "success_pct", "driving_score_lb2", "driving_score",
+               "route_completion_pct"]
+    return pd.DataFrame(rows, columns=columns).set_index(["result_set", "task"]) if rows else pd.DataFrame()
+
+
+def ability_table(df: pd.DataFrame) -> pd.DataFrame:
+    """Success % (one decimal) of each ability (rows, in the order of the scenario types) × result set
+    (columns): the episodes of its types together. Empty when ``df`` holds no scenario type."""
+    from hbmp_bench.scenarios import SCENARIO_TYPES
+
+    part = scored(df[df["task"].isin(list(SCENARIO_TYPES))])
+    if part.empty:
+        return pd.DataFrame()
+    part = part.assign(ability=part["task"].map(lambda t: SCENARIO_TYPES[t].ability))
+    table = part.pivot_table(index="ability", columns="result_set", values="success", aggfunc="mean") * 100.0
+    order = list(dict.fromkeys(k.ability for k in SCENARIO_TYPES.values()))
+    return table.loc[[a for a in order if a in table.index], _sets(part)].round(1)
+
+
 def build_report(source: pd.DataFrame | Sequence[str | os.PathLike]) -> Report:
-    """All views of ``source``: a frame from ``load_results``/``records_frame`` or records paths."""
+    """All views of ``source``: a frame from ``load_results``/``records_frame`` or records paths (the
+    ``scenarios`` and ``abilities`` views only where it holds scenario types)."""
     df = source if isinstance(source, pd.DataFrame) else load_results(source)
-    return Report({
+    views = {
         "success": success_table(df),
         "failures": failure_counts(df),
         "driving": driving_table(df),
@@ -354,7 +401,11 @@ def build_report(source: pd.DataFrame | Sequence[str | os.PathLike]) -> Report:
         "route_length": route_length_check(df),
         "coverage": coverage(df),
         "paired": paired_comparison(df),
-    })
+    }
+    scenarios = scenario_table(df)
+    if not scenarios.empty:
+        views.update(scenarios=scenarios, abilities=ability_table(df))
+    return Report(views)
 
 
 def flat_frame(df: pd.DataFrame) -> pd.DataFrame:

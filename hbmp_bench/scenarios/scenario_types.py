@@ -462,6 +462,8 @@ class ScenarioType:
         description: one sentence.
         route_legs: shortest routes chained into one (``suites.sample_chained_episode``); 1: one.
         density: the background traffic of its episodes (``suites.DENSITIES``), None: the suite's.
+        max_episodes: at most this many episodes per town (None: the suite's ``episodes_per_task``): a
+            type whose episodes are long (several km) costs as much with fewer.
     """
 
     name: str
@@ -472,6 +474,7 @@ class ScenarioType:
     description: str
     route_legs: int = 1
     density: str | None = None
+    max_episodes: int | None = None
 
 
 SCENARIO_TYPES: dict[str, ScenarioType] = {}
@@ -531,7 +534,7 @@ register_scenario_type(ScenarioType(
     "LongRoute", "Navigation", "Navigation",
     lambda net, ep: ep.route_length_m >= 2.0 * _navigation_mean_m(ep.town) and ep.turns >= 3,
     Script, "A route of several shortest routes chained (twice a Navigation route or more, 3+ turns) in "
-    "regular traffic.", route_legs=4, density="regular"))
+    "regular traffic.", route_legs=4, density="regular", max_episodes=2))
 
 
 def _navigation_mean_m(town: str) -> float:

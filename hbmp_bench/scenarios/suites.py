@@ -144,14 +144,14 @@ for _name, _seed_of, _ends, _what in (
             name=_name,
             towns=TOWNS,
             tasks=tuple(SCENARIO_TYPES),
-            episodes_per_task=10,
+            episodes_per_task=5,
             seed=_seed_of,
             end_on_violation=_ends,
             timeout_speed_kmh=5.0,
             timeout_extra_s=20.0,
             density="empty",
             description="Scenario types (a leader that brakes hard, a cut-in, a pedestrian stepping out ...: "
-            "scenarios.scenario_types), 10 episodes per type in every town it fits, set up by scripted SUMO "
+            "scenarios.scenario_types), 5 episodes per type in every town it fits (2 of the long routes), set up by scripted SUMO "
             f"actors on empty roads; timeout at 5 km/h + 20 s. {_what}",
         )
     )
@@ -498,7 +498,7 @@ def _scenario_episodes(suite: Suite, town: str, kind: ScenarioType) -> tuple[Epi
     net = road_network(town)
     traffic = traffic_for(town, kind.pose_task, kind.density or suite.density)
     episodes = []
-    for i in range(suite.episodes_per_task):
+    for i in range(min(suite.episodes_per_task, kind.max_episodes or suite.episodes_per_task)):
         def draw(rng, i=i):
             seed = _seed(suite.seed, town, kind.name, i) % (2**31)
             if kind.route_legs > 1:
