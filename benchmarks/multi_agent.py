@@ -24,6 +24,7 @@ import pandas as pd
 
 from hbmp_bench.agents import agent_env_kwargs, load_agent
 from hbmp_bench.envs import traffic_v0
+from hbmp_bench.envs.registration import RECORD_KEY
 
 RESULTS = Path(__file__).parent / "results" / "multi_agent.json"
 EXPERT_ENV = agent_env_kwargs(load_agent("expert"))
@@ -61,7 +62,7 @@ def run(env, seed: int, max_steps: int, frames: list | None = None) -> tuple[pd.
         row["red_light"] = totals["red_light"]
         row["wrong_lane"] = totals["wrong_lane"]
         if a == "ego":
-            row["success"] = bool(last_info[a].get("episode", {}).get("success", False))
+            row["success"] = bool(last_info[a].get(RECORD_KEY, {}).get("success", False))
         else:
             row["success"] = row["collisions"] == 0
     return pd.DataFrame(list(rows.values())), decisions, seconds

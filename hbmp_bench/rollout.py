@@ -59,7 +59,7 @@ class EpisodeRun:
     Attributes:
         ended: the episode ended (terminated or truncated); False: cut by the cap or ``stop``.
         decisions: steps taken.
-        info: the last info (``info["episode"]`` holds the record when ``ended`` for the package's envs).
+        info: the last info (``info["hbmp_record"]`` holds the record when ``ended`` for the package's envs).
         reset_s: wall time of the env's reset [s].
         act_s / step_s: wall time of each ``agent.act`` / ``env.step`` call [s].
         stepping_s: their sum over ``env.step`` [s].
@@ -75,8 +75,10 @@ class EpisodeRun:
 
     def record(self, env) -> dict:
         """The episode record: the final one when the episode ended, else the env's record so far."""
-        if self.ended and "episode" in self.info:
-            return dict(self.info["episode"])
+        from hbmp_bench.envs.registration import RECORD_KEY
+
+        if self.ended and RECORD_KEY in self.info:
+            return dict(self.info[RECORD_KEY])
         return env.unwrapped.record().to_dict()
 
 

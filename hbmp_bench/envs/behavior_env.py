@@ -44,7 +44,10 @@ class BehaviorEnv(EgoView):
     network, and, when the suite says so, at a collision (NoCrash) or any violation (the paper's
     protocol). Truncated at the suite's timeout (CoRL2017: route length at 10 km/h + 10 s and a full red at
     every light on the route).
-    ``info["episode"]`` then holds the episode record.
+    ``info["hbmp_record"]`` then holds the episode record (``info["episode"]`` is left to Gymnasium's
+    ``RecordEpisodeStatistics`` and SB3's ``Monitor``). ``max_cycles`` truncates at that step
+    (the record then says ``end_reason="decision_cap"``); so does Gymnasium's
+    ``gym.make(id, max_episode_steps=N)``, without a record.
 
     ## Arguments
     Keyword-only: ``scenario`` / ``world`` (the frozen configs), or their keyword form, with the
@@ -62,7 +65,9 @@ class BehaviorEnv(EgoView):
         value raises ValueError here.
     privileged: add the privileged fields to ``info["scene"]`` (the rule-based expert's; see
         :class:`WorldConfig`); default off.
-    render_mode: None or ``rgb_array``.
+    render_mode: None, ``rgb_array`` (drawn when ``render()`` is called, nothing kept) or
+        ``rgb_array_list`` (every SUMO step's frame, returned by ``render()``).
+    max_cycles: truncate the episode at this step (None: the suite's rules only).
 
     ## Implementation
     The parallel env (:class:`~hbmp_bench.envs.traffic_v0.TrafficParallelEnv`) with no background

@@ -3,7 +3,9 @@
 
 A view owns no simulation logic: its spaces are the parallel env's for the ego, ``reset`` and
 ``step`` return the ego's entries, and an action is validated once, at the parallel env's door
-(:meth:`~hbmp_bench.envs.traffic_v0.TrafficParallelEnv.check_actions`). The views differ only in
+(:meth:`~hbmp_bench.envs.traffic_v0.TrafficParallelEnv.check_actions`); rendering, episode length
+(``max_cycles``), copies and the record key (``info["hbmp_record"]``) are the parallel env's, see
+:mod:`hbmp_bench.envs.traffic_v0`. The views differ only in
 how the parallel env is configured (:class:`~hbmp_bench.envs.BehaviorEnv`: no background agent;
 :class:`~hbmp_bench.envs.control_env.ControlEnv`: the ego's control driver) and, for
 :class:`~hbmp_bench.envs.traffic_v0.EgoEnv`, in who acts for the background agents.
@@ -23,10 +25,9 @@ from hbmp_bench.envs.world import EGO_ID
 
 def keyword_signature(cls: type, *leading: inspect.Parameter) -> inspect.Signature:
     """The signature a view shows (``help``, ``inspect``): ``leading`` keyword-only parameters, then
-    ``scenario``, ``world``, ``render_mode`` and the keyword form of :func:`env_configs`."""
+    ``scenario``, ``world``, ``render_mode``, ``max_cycles`` and the keyword form of :func:`env_configs`."""
     kw = inspect.Parameter.KEYWORD_ONLY
-    own = [inspect.Parameter("scenario", kw, default=None), inspect.Parameter("world", kw, default=None),
-           inspect.Parameter("render_mode", kw, default=None)]
+    own = [inspect.Parameter(name, kw, default=None) for name in ("scenario", "world", "render_mode", "max_cycles")]
     options = list(inspect.signature(env_configs).parameters.values())
     return inspect.Signature([*leading, *own, *options])
 
@@ -38,7 +39,7 @@ class EgoView(gym.Env):
         parallel: the parallel env the view shows; the view closes it.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata = {"render_modes": ["rgb_array", "rgb_array_list"], "render_fps": 10}
 
     def __init__(self, parallel):
         self.parallel = parallel
@@ -99,13 +100,14 @@ class EgoView(gym.Env):
         obs, rewards, terms, truncs, infos = self.parallel.step({EGO_ID: action})
         return obs[EGO_ID], rewards[EGO_ID], terms[EGO_ID], truncs[EGO_ID], infos[EGO_ID]
 
-    def render(self) -> np.ndarray | None:
-        """``rgb_array``: the top-down view now, (H, W, 3) uint8 (see :mod:`hbmp_bench.render`)."""
+    def render(self) -> np.ndarray | list[np.ndarray] | None:
+        """``rgb_array``: the top-down view now, (H, W, 3) uint8 (see :mod:`hbmp_bench.render`);
+        ``rgb_array_list``: the frames of every SUMO step since the last call."""
         return self.parallel.render()
 
     def drain_frames(self) -> list[np.ndarray]:
         """All frames rendered at every 0.1 s simulation step since the last call (the frames
-        between decisions), oldest first; empty unless ``render_mode="rgb_array"``."""
+        between decisions), oldest first; empty unless ``render_mode="rgb_array_list"``."""
         return self.parallel.drain_frames()
 
     def close(self):

@@ -214,6 +214,13 @@ class ObservationBuilder:
         self.config = config
         self._path = functools.lru_cache(maxsize=256)(self._followed_path)
 
+    def __getstate__(self) -> dict:
+        """Without the path cache (an ``lru_cache`` over a bound method cannot be pickled)."""
+        return {"net": self.net, "config": self.config}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__(state["net"], state["config"])
+
     # ------------------------------------------------------------------ M_t
     def _followed_path(self, lane_id: str, next_edges: tuple[str, ...], into: tuple[frozenset[str], ...]) -> Path:
         return followed_path(self.net, lane_id, next_edges, self.config.back_m, self.config.ahead_m, into=into)

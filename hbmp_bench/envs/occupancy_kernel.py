@@ -8,7 +8,8 @@ fidelity a decision is one sim step). :func:`deformed_grid` runs the same arithm
 numpy's order (``np.linspace`` for the sample offsets, :meth:`.planning.frame.Path.frenet`'s nearest
 segment and its straight extension past both ends), so it marks the same cells (tested).
 
-numba is imported here only; :func:`.observation.occupancy_grid` imports this module on first use.
+numba is imported here only; :func:`.observation.occupancy_grid` imports this module on first use (and
+this module imports nothing of ``envs``).
 """
 
 from __future__ import annotations
@@ -91,10 +92,11 @@ def deformed_grid(ego_x, ego_y, xs, ys, yaws, lengths, widths, n_long, n_lat, ps
 
 def compile_kernel() -> None:
     """Compile :func:`deformed_grid` (or load it from numba's on-disk cache) for the argument types
-    :func:`.observation.occupancy_grid` passes, so that the first M_t of a timed run does not compile."""
-    from hbmp_bench.envs.observation import ObservationConfig, occupancy_grid
+    :func:`.observation.occupancy_grid` passes (C-contiguous float64 arrays, Python ints and floats, a
+    :class:`~hbmp_bench.planning.frame.Path`'s segment arrays), so that the first M_t of a timed run
+    does not compile. (It calls the kernel itself: this module never imports ``observation``.)"""
     from hbmp_bench.planning.frame import Path
 
     path = Path(np.column_stack([np.linspace(-20.0, 60.0, 9), np.zeros(9)]))
-    occupancy_grid(ObservationConfig(), np.zeros(2), 0.0, path, np.array([[8.0, 3.5]]), np.zeros(1), np.array([4.5]),
-                   np.array([1.8]))
+    deformed_grid(0.0, 0.0, np.array([8.0]), np.array([3.5]), np.zeros(1), np.array([4.5]), np.array([1.8]), 10, 4,
+                  *path.segment_arrays(), 64, 36, 1.0, 0.5, 16.0, 48.0, 9.0)

@@ -29,7 +29,7 @@ def record_episode(
 ) -> dict:
     """Run ``agent`` on one episode of ``env_id`` and write every ``every``-th rendered frame.
 
-    The env is made with ``render_mode="rgb_array"``; the frames it rendered at each
+    The env is made with ``render_mode="rgb_array_list"``; the frames it rendered at each
     simulation step (``env.unwrapped.drain_frames()``) are collected after ``reset`` and
     after every decision. The episode is reset with ``seed=episode_index``, like the
     evaluation runner, so the record matches ``hbmp-bench run``.
@@ -64,7 +64,7 @@ def record_episode(
     if fps is not None and not (np.isfinite(fps) and fps > 0):
         raise ValueError(f"fps must be finite and > 0, got {fps!r}")
     policy = load_agent(agent)
-    kwargs = dict(agent_env_kwargs(policy), **env_kwargs, render_mode="rgb_array", suite=suite)
+    kwargs = dict(agent_env_kwargs(policy), **env_kwargs, render_mode="rgb_array_list", suite=suite)
     if env_id != TRAINING_ID:
         kwargs["episode_index"] = episode_index
     if fidelity is not None:
@@ -95,7 +95,7 @@ def record_episode(
     finally:
         env.close()
     if not frames:
-        raise RuntimeError(f"{env_id} rendered no frames; does it support render_mode='rgb_array'?")
+        raise RuntimeError(f"{env_id} rendered no frames; does it support render_mode='rgb_array_list'?")
     record["agent"] = agent
     write_video(frames, path, fps if fps is not None else 1.0 / (step_s * every))
     return record

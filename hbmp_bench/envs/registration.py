@@ -9,6 +9,10 @@ from hbmp_bench.maps import TOWNS
 from hbmp_bench.scenarios import TASKS
 
 ENTRY_POINT = "hbmp_bench.envs.behavior_env:BehaviorEnv"
+RECORD_KEY = "hbmp_record"
+"""The ``info`` key of the episode record at the end of an episode (the ego's, in every env of the
+package). Not ``"episode"``: that key belongs to the ecosystem's episode statistics (Gymnasium's
+``RecordEpisodeStatistics``, SB3's ``Monitor``), which would replace or trip over the record."""
 TRAINING_ID = "hbmp_bench/Training-v0"
 
 

@@ -44,7 +44,35 @@ leaves SUMO); when the ego's episode ends every other live agent is truncated.
 ``info``: ``decision_required``, ``action_mask``, ``events`` and ``infractions`` (its own),
 ``scene`` (R_t's quantities in metres and m/s, :class:`~hbmp_bench.envs.scene.Scene`; the ego's
 with its straight-line goal distance, and with ``privileged=True`` the privileged fields the
-expert reads), ``reward_components``, ``time_s``.
+expert reads), ``reward_components``, ``time_s``; at the end of the ego's episode the ego's
+``info["hbmp_record"]`` (:data:`~hbmp_bench.envs.registration.RECORD_KEY`) holds its episode record
+(``info["episode"]`` is left to the ecosystem's episode statistics: Gymnasium's
+``RecordEpisodeStatistics``, SB3's ``Monitor``).
+
+## Episode length
+The ego's episode ends by its suite's rules (goal, violation, the suite's timeout in simulated
+seconds). A trainer that wants shorter episodes in steps sets ``max_cycles`` (PettingZoo's name):
+the ``max_cycles``-th step truncates every live agent (r_k of a behavior it cuts is paid, the ego's
+record has ``end_reason="decision_cap"``); the gymnasium views take it too (or Gymnasium's own
+``gym.make(id, max_episode_steps=N)``, a ``TimeLimit``, which leaves no record in the last info).
+
+## Rendering
+``render_mode="rgb_array"``: :meth:`render` draws the ego-centred top-down view when it is called,
+and nothing is drawn or kept otherwise (Gymnasium's semantics; SB3's ``make_vec_env`` asks for this
+mode and never calls ``render``). ``"rgb_array_list"``: a frame is drawn after every 0.1 s SUMO step
+and :meth:`render` returns the frames since the last call or reset (the video recorder's mode).
+
+## Copies
+A copy (``pickle``, ``copy.deepcopy``) is the env before its first reset, with the same configs: a
+running SUMO simulation cannot be copied (libsumo is one per process), so the copy starts its own at
+its first ``reset``. Vector envs that copy an env (SuperSuit's ``concat_vec_envs_v1``) work so.
+
+## Generic trainers
+The env follows PettingZoo (Dict observations, every live agent in every dict, ``decision_required``
+for agents still executing a behavior, whose actions are ignored). The wrappers of
+:mod:`hbmp_bench.envs.ecosystem` give Box observations, a fixed agent set (SuperSuit) and RLlib's
+convention of observing only agents with a decision; :func:`hbmp_bench.envs.rllib.rllib_env` is the
+env for RLlib (see ``docs/recipes.md``).
 
 ## Bad input
 An action for an agent that is not live (unknown or finished) raises ValueError naming the live
@@ -59,7 +87,9 @@ agents driven by a given policy. All run :class:`hbmp_bench.envs.world.DrivingWo
 vehicles are :class:`hbmp_bench.envs.vehicle.ControlledVehicle`.
 
 ## Version history
-v0: first release.
+v0: first release. The record moved from ``info["episode"]`` to ``info["hbmp_record"]``;
+``render_mode="rgb_array"`` draws on demand and ``"rgb_array_list"`` keeps the frames between
+decisions (both without a change of the episodes).
 """
 
 from __future__ import annotations
@@ -94,14 +124,23 @@ def _controlled_count(controlled: str | int, vehicles: int) -> int:
     raise ConfigError(f"controlled must be 'none', 'all' or an int, got {controlled!r}")
 
 
-RENDER_MODES = (None, "rgb_array")
+RENDER_MODES = (None, "rgb_array", "rgb_array_list")
+"""None, ``rgb_array`` (a frame when :meth:`TrafficParallelEnv.render` is called) and
+``rgb_array_list`` (every SUMO step's frame, returned and dropped by each ``render``)."""
 
 
 def check_render_mode(render_mode: str | None) -> str | None:
-    """``render_mode`` if the envs support it; ValueError naming the valid ones."""
+    """``render_mode`` if the envs support it; ConfigError naming the valid ones."""
     if render_mode not in RENDER_MODES:
-        raise ConfigError(f"render_mode {render_mode!r} is not supported; valid: None, 'rgb_array'")
+        raise ConfigError(f"render_mode {render_mode!r} is not supported; valid: {', '.join(map(repr, RENDER_MODES))}")
     return render_mode
+
+
+def check_max_cycles(max_cycles: int | None) -> int | None:
+    if max_cycles is not None and (isinstance(max_cycles, bool) or not isinstance(max_cycles, (int, np.integer))
+                                   or max_cycles < 1):
+        raise ConfigError(f"max_cycles must be an int >= 1 or None, got {max_cycles!r}")
+    return None if max_cycles is None else int(max_cycles)
 
 
 def build_configs(scenario: ScenarioConfig | None, world: WorldConfig | None,
@@ -126,23 +165,28 @@ class TrafficParallelEnv(ParallelEnv):
             :func:`~hbmp_bench.envs.config.env_configs`, the one place their defaults live).
             ``ego_fidelity`` is this env's name for ``fidelity`` (the ego's).
         controlled: ``"none"``, an int N or ``"all"``: background vehicles driven by agents.
-        render_mode: None or ``rgb_array`` (:meth:`render`: the ego-centred top-down view, with
-            every vehicle and pedestrian; :meth:`drain_frames`: one picture per SUMO step).
+        render_mode: None, ``rgb_array`` (:meth:`render` draws the ego-centred top-down view, with
+            every vehicle and pedestrian, when called) or ``rgb_array_list`` (one picture per SUMO
+            step, returned by :meth:`render`); see the module docstring.
+        max_cycles: truncate every live agent at this step of an episode (None: the suite's rules only).
 
     An ego with ``ego_driver="control"`` acts with ``Box(-1, 1, (2,))`` = ``[accel, steer]`` and
     observes R_t with two more entries (see :mod:`hbmp_bench.envs.control_env`).
     """
 
-    metadata = {"name": "hbmp_traffic_v0", "render_modes": ["rgb_array"], "render_fps": 10, "is_parallelizable": True}
+    metadata = {"name": "hbmp_traffic_v0", "render_modes": ["rgb_array", "rgb_array_list"], "render_fps": 10,
+                "is_parallelizable": True}
 
     def __init__(self, *, scenario: ScenarioConfig | None = None, world: WorldConfig | None = None,
-                 controlled: str | int = "all", render_mode: str | None = None, ego_fidelity: str | None = None,
-                 **options: Any):
+                 controlled: str | int = "all", render_mode: str | None = None, max_cycles: int | None = None,
+                 ego_fidelity: str | None = None, **options: Any):
         if ego_fidelity is not None:
             if "fidelity" in options:
                 raise TypeError("give ego_fidelity or fidelity, not both")
             options["fidelity"] = ego_fidelity
         self.render_mode = check_render_mode(render_mode)
+        self.max_cycles = check_max_cycles(max_cycles)
+        self._cycles = 0
         self.scenario, self.config = build_configs(scenario, world, options)
         self.n_controlled = _controlled_count(controlled, self.scenario.least_vehicles)
         self.possible_agents = [EGO_ID, *(f"bg{k}" for k in range(self.n_controlled))]
@@ -202,8 +246,8 @@ class TrafficParallelEnv(ParallelEnv):
         obs, infos = self.world.start(episode, seed=int(self._rng.integers(2**31)), controlled=self.n_controlled,
                                       salt=salt)
         self.agents = list(self.world.live)
-        self._frames, self._last_behavior = [], ""
-        if self.render_mode == "rgb_array":
+        self._frames, self._last_behavior, self._cycles = [], "", 0
+        if self.render_mode == "rgb_array_list":
             self._capture()
         return obs, infos
 
@@ -229,7 +273,10 @@ class TrafficParallelEnv(ParallelEnv):
         clean = self.check_actions(actions)
         if EGO_ID in clean and self.config.ego_driver != "control":
             self._last_behavior = BEHAVIORS[clean[EGO_ID]]
-        result = self.world.step(clean, on_substep=self._capture if self.render_mode == "rgb_array" else None)
+        self._cycles += 1
+        last = self.max_cycles is not None and self._cycles >= self.max_cycles
+        result = self.world.step(clean, on_substep=self._capture if self.render_mode == "rgb_array_list" else None,
+                                 last=last)
         self.agents = list(self.world.live)
         return result
 
@@ -249,20 +296,29 @@ class TrafficParallelEnv(ParallelEnv):
     def _capture(self) -> None:
         self._frames.append(self._frame())
 
-    def render(self) -> np.ndarray | None:
-        """``rgb_array``: (H, W, 3) uint8 top-down view centred on the ego, after the last SUMO
-        step (None without a render mode)."""
+    def render(self) -> np.ndarray | list[np.ndarray] | None:
+        """``rgb_array``: the (H, W, 3) uint8 top-down view centred on the ego now, drawn by this
+        call; ``rgb_array_list``: the frames of every 0.1 s SUMO step since the last call or reset,
+        oldest first (:meth:`drain_frames`); None without a render mode."""
         if self.render_mode is None:
             return None
         if self._world is None or self._world.ego is None:
             raise RuntimeError("call reset() before render()")
-        return self._frames[-1] if self._frames else self._frame()
+        if self.render_mode == "rgb_array_list":
+            return self.drain_frames()
+        return self._frame()
 
     def drain_frames(self) -> list[np.ndarray]:
         """All frames rendered at every 0.1 s simulation step since the last call (the frames
-        between decisions), oldest first; empty unless ``render_mode="rgb_array"``."""
+        between decisions), oldest first; empty unless ``render_mode="rgb_array_list"``."""
         frames, self._frames = self._frames, []
         return frames
+
+    def __getstate__(self) -> dict:
+        """The env before its first reset (see the module docstring, Copies)."""
+        state = self.__dict__.copy()
+        state.update(_world=None, _renderer=None, _frames=[], agents=[], _cycles=0, _last_behavior="")
+        return state
 
     def record(self, agent: str = ""):
         """The ego's episode record so far (:class:`~hbmp_bench.metrics.EpisodeRecord`); None before
@@ -309,6 +365,10 @@ class EgoEnv(EgoView):
         self._policies: dict[str, Any] = {}
         self._obs: dict[str, Any] = {}
         self._infos: dict[str, Any] = {}
+
+    def __getstate__(self) -> dict:
+        """Before its first reset, as the parallel env's copies (the policies are made at reset)."""
+        return {**self.__dict__, "_policies": {}, "_obs": {}, "_infos": {}}
 
     def _after_reset(self, obs: dict, infos: dict) -> None:
         from hbmp_bench.agents import load_agent

@@ -18,6 +18,7 @@ the r_k of the behavior it was cut in.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -30,7 +31,8 @@ from hbmp_bench.maps import net_path
 from hbmp_bench.metrics.detectors import InfractionDetector, StepEvents
 from hbmp_bench.metrics.episode import EpisodeId, add_events
 from hbmp_bench.metrics.geometry import LaneLocator
-from hbmp_bench.metrics.records import EpisodeRecord
+from hbmp_bench.envs.registration import RECORD_KEY
+from hbmp_bench.metrics.records import DECISION_CAP, EpisodeRecord
 from hbmp_bench.scenarios import Episode, episode_entropy, road_network
 from hbmp_bench.scenarios.scenario_types import Script, script_for
 from hbmp_bench.sim.sumo import BACKGROUND_TYPE, EGO_TYPE, SumoSim, VehicleType
@@ -196,9 +198,11 @@ class DrivingWorld:
     def needs_decision(self, name: str) -> bool:
         return name in self.live and name not in self._running
 
-    def step(self, actions: dict[str, int], on_substep: Callable[[], None] | None = None):
+    def step(self, actions: dict[str, Any], on_substep: Callable[[], None] | None = None, last: bool = False):
         """Begin the behaviors of the vehicles that need a decision, run until any behavior ends
-        (``on_substep`` is called after every SUMO step).
+        (``on_substep`` is called after every SUMO step). ``last``: the step ends the episode of
+        every vehicle still live (truncated; the ego's record says ``decision_cap``), a trainer's
+        step cap.
 
         Returns (observations, rewards, terminations, truncations, infos) keyed by the vehicles live
         before the call; finished vehicles leave ``live``."""
@@ -229,6 +233,8 @@ class DrivingWorld:
                 on_substep()
             if any(self.vehicles[name].end_reason for name in self.live):
                 break
+        if last and not self.ego.end_reason:
+            self.ego.end_reason = DECISION_CAP
         return self._collect(events, ended)
 
     def _outcome(self, name: str, events: StepEvents, behavior_ended: bool) -> tuple[dict, float, dict]:
@@ -248,7 +254,7 @@ class DrivingWorld:
             last = terms[name] or truncs[name]
             obs[name], rewards[name], infos[name] = self._outcome(name, events[name], name in ended or last)
         if over:
-            infos[EGO_ID]["episode"] = self.record().to_dict()
+            infos[EGO_ID][RECORD_KEY] = self.record().to_dict()
         for name in list(self.live):
             infos[name]["decision_required"] = self.needs_decision(name) and not (terms[name] or truncs[name])
             if terms[name] or truncs[name]:

@@ -30,6 +30,7 @@ from typing import Any
 
 from hbmp_bench import rollout
 from hbmp_bench.envs.actions import check_action
+from hbmp_bench.envs.registration import RECORD_KEY
 from hbmp_bench.plugins import resolve
 from hbmp_bench.evaluation import channel
 from hbmp_bench.evaluation.sandbox import protect_process
@@ -43,7 +44,7 @@ WALL_BUDGET = "wall-clock budget"
 """How the error of an episode ended by its wall-clock budget begins (``RunnerLimits.episode_wall_factor``;
 its end reason is ``agent_error``: only the agent's answers can stretch an episode that far)."""
 
-EPISODE_IDENTITY = ("episode_key", "episode", "episode_index", "seed", "salt")
+EPISODE_IDENTITY = ("episode_key", RECORD_KEY, "episode", "episode_index", "seed", "salt")
 """Info keys that name the episode (or its record, seed or salt): the env process never sends them
 to the agent, so an agent cannot look up its episode in the public suite and rebuild it (with
 ``privileged=True``) in its own process. (The start pose still matches a public episode: only a
@@ -267,7 +268,7 @@ def run_episode(task: EpisodeTask, env_slot: _EnvSlot, agent: _AgentLink, limits
         return outcome(blank_record(task, SIM_ERROR, f"{where}:\n{trace}"), SIM_ERROR, True)
     if not run.ended:
         return outcome(partial_record(env, task, DECISION_CAP, ""), "ok", False)
-    return outcome(dataclasses.replace(EpisodeRecord(**run.info["episode"]), agent=task.agent), "ok", False)
+    return outcome(dataclasses.replace(EpisodeRecord(**run.info[RECORD_KEY]), agent=task.agent), "ok", False)
 
 
 def env_main(pool_conn: Connection, limits: RunnerLimits, lifeline: Connection,

@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from hbmp_bench.envs.registration import RECORD_KEY
 from hbmp_bench.errors import ConfigError
 from hbmp_bench.vocabulary import INFRACTION_KINDS, TRAINING_REWARD_MODES
 
@@ -100,7 +101,7 @@ class EpisodeTally:
 
     def summary(self, info: dict) -> dict[str, Any]:
         """One training-log row (without the episode counter): rewards, outcome, infractions, length."""
-        record = info.get("episode", {})
+        record = info.get(RECORD_KEY, {})
         return {
             "r_T": self.r_T,
             "r_T_plus_r_t": self.r_T + self.r_k,

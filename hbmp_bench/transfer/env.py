@@ -11,6 +11,7 @@ from gymnasium import spaces
 
 from hbmp_bench import __version__
 from hbmp_bench.envs.observation import ObservationConfig, observation_space
+from hbmp_bench.envs.registration import RECORD_KEY
 from hbmp_bench.errors import ConfigError
 from hbmp_bench.metrics.detectors import EVENT_KINDS
 from hbmp_bench.metrics.episode import EpisodeId, EpisodeScorer, terminal_reward
@@ -133,7 +134,7 @@ class HighwayTransferEnv(gym.Env):
     scene's duration (then truncated=False, terminated=True), merge / roundabout / intersection =
     reaching the scene's goal road (see :mod:`hbmp_bench.transfer.scenes`). Truncated at the
     duration otherwise (timeout). Off-road (``not vehicle.on_road``) is counted, not terminal.
-    ``info["episode"]`` then holds the episode record (suite ``highway-transfer``, town and task =
+    ``info["hbmp_record"]`` then holds the episode record (suite ``highway-transfer``, town and task =
     scene, fidelity ``highway-env:<observation kind>``).
 
     ## Seeding
@@ -284,7 +285,7 @@ class HighwayTransferEnv(gym.Env):
         truncated = self._done_reason == "timeout"
         if terminated or truncated:
             self._running = False
-            info["episode"] = self.record().to_dict()
+            info[RECORD_KEY] = self.record().to_dict()
         return obs, reward, terminated, truncated, info
 
     def _settled(self) -> bool:

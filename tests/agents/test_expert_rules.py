@@ -384,7 +384,7 @@ def test_the_expert_drives_real_episodes_lawfully(town, task, episode, fidelity)
                 break
     finally:
         env.close()
-    record = info["episode"]
+    record = info["hbmp_record"]
     assert record["end_reason"] == "goal", record
     assert record["red_light"] == record["collision_vehicle"] == record["collision_pedestrian"] == 0
 

@@ -87,7 +87,7 @@ def run_single(town: str, task: str, index: int, fidelity: str) -> dict:
                 break
     finally:
         env.close()
-    record = dict(info["episode"])
+    record = dict(info["hbmp_record"])
     record.pop("package_version", None)
     return {"record": record, "digest": h.hexdigest()}
 
@@ -115,7 +115,7 @@ def run_multi(town: str, task: str, index: int, controlled: int, ego_fidelity: s
                 _feed(h, a, actions.get(a, -1), rewards[a], obs[a], terms[a], truncs[a])
             steps += 1
         ego_info = infos.get("ego", {})
-        record = ego_info.get("episode") or _ego_record_so_far(env)
+        record = ego_info.get("hbmp_record") or _ego_record_so_far(env)
     finally:
         env.close()
     record = dict(record)

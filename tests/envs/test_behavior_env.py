@@ -104,7 +104,7 @@ def test_expert_clean_success_on_a_static_episode():
         obs, reward, terminated, truncated, info = env.step(agent.act(obs, info))
         if terminated or truncated:
             break
-    record = info["episode"]
+    record = info["hbmp_record"]
     env.close()
     parts = info["reward_components"]
     assert record["success"] and parts["r_T"] == 100.0
@@ -137,9 +137,9 @@ def test_leaving_the_network_before_the_goal_pays_the_overtime_penalty():
     env.world.ego.driver.off_map = True  # what the driver reports when SUMO cannot place the car
     _, reward, terminated, truncated, info = env.step(0)
     env.close()
-    assert terminated and not truncated and info["episode"]["end_reason"] == "left_network"
+    assert terminated and not truncated and info["hbmp_record"]["end_reason"] == "left_network"
     assert info["reward_components"]["r_T"] == TERMINAL_REWARD["timeout"] == -50.0
-    assert not info["episode"]["success"]
+    assert not info["hbmp_record"]["success"]
 
 
 def test_an_episode_a_violation_ends_pays_the_overtime_penalty_too():

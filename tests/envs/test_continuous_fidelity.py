@@ -36,7 +36,7 @@ def test_expert_reaches_the_goal_with_planner_rewards():
     env = BehaviorEnv(town="Town01", task="Straight", episode_index=0)
     steps = _run(env)
     reward, info = steps[-1]
-    record = info["episode"]
+    record = info["hbmp_record"]
     env.close()
     assert record["success"] and record["fidelity"] == "continuous"
     assert record["collision_vehicle"] + record["wrong_lane"] + record["off_road"] + record["red_light"] == 0
@@ -78,17 +78,32 @@ def test_ego_pose_in_sumo_follows_the_vehicle_model():
 
 
 @pytest.mark.slow
-def test_render_returns_frames_between_decisions():
-    env = BehaviorEnv(town="Town01", task="Straight", episode_index=0, render_mode="rgb_array")
+def test_render_list_returns_frames_between_decisions():
+    env = BehaviorEnv(town="Town01", task="Straight", episode_index=0, render_mode="rgb_array_list")
     env.reset(seed=0)
-    first = env.drain_frames()
+    first = env.render()
     _, _, _, _, info = env.step(0)
     frames = env.drain_frames()
+    _, _, _, _, info2 = env.step(0)
+    again = env.render()
+    env.close()
+    assert len(first) == 1 and env.render() == []  # each call returns the frames since the last one
+    assert len(frames) == round(info["duration_s"] / 0.1)  # one per 0.1 s simulation step
+    assert len(again) == round(info2["duration_s"] / 0.1)
+    assert all(f.shape == (400, 400, 3) and f.dtype == np.uint8 for f in frames)
+
+
+@pytest.mark.slow
+def test_rgb_array_draws_on_demand_and_keeps_nothing():
+    env = BehaviorEnv(town="Town01", task="Straight", episode_index=0, render_mode="rgb_array")
+    env.reset(seed=0)
+    env.step(0)
+    env.step(0)
+    assert env.parallel._frames == [] and env.drain_frames() == []  # nothing drawn between decisions
     image = env.render()
     env.close()
-    assert len(first) == 1
-    assert len(frames) == round(info["duration_s"] / 0.1)  # one per 0.1 s simulation step
     assert image.shape == (400, 400, 3) and image.dtype == np.uint8
+    assert len(np.unique(image.reshape(-1, 3), axis=0)) > 10
 
 
 @pytest.mark.slow

@@ -47,7 +47,7 @@ def test_driving_through_red_is_detected():
             break
     env.close()
     assert total >= 1
-    assert info["episode"]["red_light"] == total
+    assert info["hbmp_record"]["red_light"] == total
 
 
 def _speed_up_towards_a_standing_car(fidelity: str) -> tuple[int, dict]:
@@ -219,7 +219,7 @@ def test_expert_stops_at_red_lights_and_drives_a_clean_episode():
             and env.world.sim.light_ahead(EGO_ID).state in "rR"
         if terminated or truncated:
             break
-    record = info["episode"]
+    record = info["hbmp_record"]
     env.close()
     assert record["success"]
     assert waited_at_red > 0

@@ -83,7 +83,7 @@ def test_a_salted_episode_is_deterministic_given_its_salt_and_the_public_one_unc
         for name, salt in (("public", ""), ("none", None), ("a", salt_a), ("a again", salt_a), ("b", salt_b)):
             options = {"episode_index": 0} if salt is None else {"episode_index": 0, "salt": salt}
             run = run_episode(env, load_agent("expert"), seed=0, options=options)
-            runs[name] = {k: run.info["episode"][k] for k in COMPARED}
+            runs[name] = {k: run.info["hbmp_record"][k] for k in COMPARED}
             runs[name]["lights"] = env.world.sim.light_states() if name != "none" else None
     finally:
         env.close()

@@ -28,7 +28,7 @@ def _drive(town: str, index: int) -> tuple[dict, np.ndarray]:
             obs, _, terminated, truncated, info = env.step(agent.act(obs, info))
             progress.append(info["route_completion"])
             if terminated or truncated:
-                record = info["episode"]
+                record = info["hbmp_record"]
                 return record, np.array(progress) * record["route_length_m"]
     finally:
         env.close()

@@ -134,7 +134,7 @@ def _run(env, agent_name, seed):
 def test_short_expert_episode_records_the_outcome():
     env = HighwayTransferEnv(scene="merge")
     trace, info = _run(env, "expert", seed=0)
-    record = info["episode"]
+    record = info["hbmp_record"]
     assert record["suite"] == "highway-transfer" and record["town"] == record["task"] == "merge"
     assert record["fidelity"] == "highway-env:deformed"
     assert record["end_reason"] in ("goal", "collision", "timeout")
@@ -150,7 +150,7 @@ def test_same_seed_same_episode():
     env = HighwayTransferEnv(scene="intersection")
     a, info_a = _run(env, "random", seed=3)
     b, info_b = _run(env, "random", seed=3)
-    assert a == b and info_a["episode"] == info_b["episode"]
+    assert a == b and info_a["hbmp_record"] == info_b["hbmp_record"]
     env.close()
 
 
