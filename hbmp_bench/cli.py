@@ -22,13 +22,14 @@ def _cmd_list(args: argparse.Namespace) -> int:
     from hbmp_bench.agents import AGENTS
     from hbmp_bench.envs import env_ids
     from hbmp_bench.maps import TOWNS, available_maps
-    from hbmp_bench.scenarios import SUITES, TASKS
+    from hbmp_bench.scenarios import SCENARIO_TYPES, SUITES, TASKS
 
     listing = {
         "env_ids": list(env_ids()),
         "towns": list(TOWNS),
         "maps": list(available_maps()),
         "tasks": list(TASKS),
+        "scenario_types": {name: f"[{k.ability}] {k.description}" for name, k in SCENARIO_TYPES.items()},
         "suites": {name: s.description for name, s in SUITES.items()},
         "agents": sorted(AGENTS),
     }
@@ -39,9 +40,10 @@ def _cmd_list(args: argparse.Namespace) -> int:
         print(f"{key}:")
         for item in listing[key]:
             print(f"  {item}")
-    print("suites:")
-    for name, text in listing["suites"].items():
-        print(f"  {name:16s} {text}")
+    for key in ("scenario_types", "suites"):
+        print(f"{key}:")
+        for name, text in listing[key].items():
+            print(f"  {name:18s} {text}")
     return 0
 
 

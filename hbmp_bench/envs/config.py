@@ -16,7 +16,8 @@ import numpy as np
 from hbmp_bench.envs.drivers import FIDELITIES, ContinuousConfig
 from hbmp_bench.envs.observation import ObservationConfig
 from hbmp_bench.planning.behaviors import BehaviorConfig
-from hbmp_bench.scenarios import (Episode, Traffic, check_task, check_town, get_suite, sample_episode,
+from hbmp_bench.maps import available_maps
+from hbmp_bench.scenarios import (SCENARIO_TYPES, Episode, Traffic, check_task, check_town, get_suite, sample_episode,
                                   suite_episodes, traffic_for)
 from hbmp_bench.errors import ConfigError
 
@@ -31,7 +32,8 @@ class ScenarioConfig:
     Attributes:
         town: map name (``Town01``..``Town05`` or an imported map).
         task: ``Straight``, ``OneTurn``, ``Navigation`` or ``NavigationDynamic`` (default: the
-            category with traffic, so that the parallel env has background agents by default).
+            category with traffic, so that the parallel env has background agents by default), or a
+            scenario type (``HardBrake`` ...: ``scenarios.scenario_types``, with a ``scenarios`` suite).
         suite: episode list and rules (``corl2017``, ``hbmp``, ``nocrash-*``).
         episode_index: fix one episode of the list; None draws one per reset from the env's
             generator (the reset seed).
@@ -41,7 +43,8 @@ class ScenarioConfig:
 
     Raises:
         UnknownNameError: an unknown town, task, suite or density (naming the valid ones).
-        ConfigError: ``episode_index`` outside the list, or given with ``random_goals`` (a ValueError).
+        ConfigError: ``episode_index`` outside the list, or given with ``random_goals`` (a ValueError); a
+            scenario type the town cannot host (naming those that can) or with ``random_goals``.
     """
 
     town: str = "Town01"
@@ -57,6 +60,13 @@ class ScenarioConfig:
         object.__setattr__(self, "suite", get_suite(self.suite).name)
         if self.density is not None:
             traffic_for(self.town, self.task, self.density)
+        if self.task in SCENARIO_TYPES:
+            if self.random_goals:
+                raise ConfigError(f"{self.task} is a scenario type: its episodes are the suite's, not random goals")
+            if not self.episodes:
+                hosts = [t for t in available_maps() if suite_episodes(self.suite, t, self.task)]
+                raise ConfigError(f"{self.town} cannot host {self.task} ({SCENARIO_TYPES[self.task].description}); "
+                                  f"towns that can: {', '.join(hosts)}")
         if self.episode_index is not None:
             if self.random_goals:
                 raise ConfigError("episode_index and random_goals exclude each other")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from PIL import Image
 
@@ -69,7 +70,22 @@ def record_episode(
         kwargs["episode_index"] = episode_index
     if fidelity is not None:
         kwargs["fidelity"] = fidelity
-    env = make(env_id, **kwargs)
+    factory = getattr(policy, "env_factory", None)  # the env an agent needs besides the behavior env (flat's)
+    if factory is None:
+        env = make(env_id, **kwargs)
+    else:
+        from hbmp_bench.evaluation.tasks import AGENT_ENV_FACTORIES
+        from hbmp_bench.plugins import resolve
+
+        if factory not in AGENT_ENV_FACTORIES:
+            raise ValueError(f"the agent asks for env_factory {factory!r}; an agent may only ask for "
+                             f"{list(AGENT_ENV_FACTORIES)}")
+        from hbmp_bench.envs.registration import env_ids
+        from hbmp_bench.errors import UnknownNameError
+
+        if env_id not in env_ids():
+            raise UnknownNameError("env id", env_id, env_ids())
+        env = resolve(factory, "env factory")(**{**gym.spec(env_id).kwargs, **kwargs})
     frames: list[Image.Image] = []
     seen = 0
 

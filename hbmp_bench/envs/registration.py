@@ -1,4 +1,4 @@
-"""Gymnasium ids: ``hbmp_bench/<Town>-<Task>-v0`` for the five towns and four tasks, plus
+"""Gymnasium ids: ``hbmp_bench/<Town>-<Task>-v0`` for the five towns and the four tasks and scenario types, plus
 ``hbmp_bench/Training-v0`` (random start and goal every reset; Town03 by default, as in the paper)."""
 
 from __future__ import annotations
@@ -16,18 +16,24 @@ package). Not ``"episode"``: that key belongs to the ecosystem's episode statist
 TRAINING_ID = "hbmp_bench/Training-v0"
 
 
+SCENARIO_SUITE = "scenarios"
+"""The suite of the scenario types' env ids (``hbmp_bench/Town03-HardBrake-v0``)."""
+
+
 def env_ids() -> tuple[str, ...]:
-    """Every registered id of the package."""
-    return tuple(f"hbmp_bench/{town}-{task}-v0" for town in TOWNS for task in TASKS) + (TRAINING_ID,)
+    """Every registered id of the package: town × task, town × scenario type (an id of a type its town
+    cannot host fails at construction, naming the towns that can), and the training id."""
+    return tuple(f"hbmp_bench/{town}-{task}-v0" for town in TOWNS for task in (*TASKS, *SCENARIO_TYPES)) + (TRAINING_ID,)
 
 
 def register_envs() -> None:
     """Register every id (idempotent)."""
     for town in TOWNS:
-        for task in TASKS:
+        for task in (*TASKS, *SCENARIO_TYPES):
             env_id = f"hbmp_bench/{town}-{task}-v0"
+            kwargs = {"town": town, "task": task, **({"suite": SCENARIO_SUITE} if task in SCENARIO_TYPES else {})}
             if env_id not in gym.registry:
-                gym.register(env_id, entry_point=ENTRY_POINT, kwargs={"town": town, "task": task}, disable_env_checker=True)
+                gym.register(env_id, entry_point=ENTRY_POINT, kwargs=kwargs, disable_env_checker=True)
     if TRAINING_ID not in gym.registry:
         gym.register(
             TRAINING_ID,

@@ -501,7 +501,7 @@ def all_tasks() -> tuple[str, ...]:
 register_scenario_type(ScenarioType(
     "HardBrake", "Emergency brake", "Straight",
     lambda net, ep: _remaining_m(net, ep) >= HardBrake.AHEAD_M + 30.0,
-    HardBrake, HardBrake.__doc__.split(";")[0]))
+    HardBrake, "A leader ahead on the ego's lane brakes to a stop at 8 m/s^2, a car's hardest."))
 register_scenario_type(ScenarioType(
     "CutIn", "Merging", "Straight",
     lambda net, ep: _remaining_m(net, ep) >= 100.0 and _cut_in_side(net, ep) != 0,
