@@ -6,7 +6,7 @@ from __future__ import annotations
 import gymnasium as gym
 
 from hbmp_bench.maps import TOWNS
-from hbmp_bench.scenarios import TASKS
+from hbmp_bench.scenarios import SCENARIO_TYPES, TASKS
 
 ENTRY_POINT = "hbmp_bench.envs.behavior_env:BehaviorEnv"
 RECORD_KEY = "hbmp_record"
