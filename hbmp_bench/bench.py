@@ -494,10 +494,9 @@ def target_checks(result: dict, targets: Targets = Targets()) -> list[dict]:
 
 
 # ------------------------------------------------------------------ driver
-def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
-    """Every measurement of ``cfg`` in one run; the JSON-ready result (see the module doc)."""
-    from tqdm import tqdm
-
+def _jobs(cfg: BenchConfig) -> tuple[list[tuple[str, str | None, Any]], str, str]:
+    """(kind, town, what) of every measurement ``cfg`` asks for, in the order they run; and why highway-env and
+    Ray are skipped ("" where they are not)."""
     jobs = [("raw", t, None) for t in cfg.towns] + [("env", t, f) for t in cfg.towns for f in FIDELITIES]
     highway_missing = _missing("highway_env") if cfg.highway_seconds > 0 else ""
     jobs += [("highway", None, e) for e in (HIGHWAY_ENVS if cfg.highway_seconds > 0 and not highway_missing else ())]
@@ -505,36 +504,49 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
     ray_missing = _missing("ray") if cfg.ray_workers else ""
     jobs += [("ray", None, n) for n in (cfg.ray_workers if not ray_missing else ())]
     jobs += [("import", None, cfg.import_repeats)] if cfg.import_repeats else []
-    towns: dict[str, dict] = {t: {} for t in cfg.towns}
-    highway, scaling, on_ray, imported = {}, [], [], {}
+    return jobs, highway_missing, ray_missing
+
+
+def _measure(cfg: BenchConfig, kind: str, town: str | None, what: Any, result: dict) -> None:
+    """Run one job of :func:`_jobs` and put its row where ``result`` keeps that kind."""
+    if kind == "raw":
+        result["towns"][town]["raw_sumo"] = measure_raw_sumo(cfg, town)
+    elif kind == "env":
+        result["towns"][town][what] = measure_env(cfg, town, what)
+    elif kind == "highway":
+        result["highway_env"][what] = measure_highway(what, cfg.highway_seconds)
+    elif kind == "import":
+        result["import"] = measure_import(what)
+    elif kind == "ray":
+        result["ray_scaling"].append(measure_ray_scaling(cfg, what))
+    else:
+        result["scaling"].append(measure_scaling(cfg, what))
+
+
+def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
+    """Every measurement of ``cfg`` in one run; the JSON-ready result (see the module doc)."""
+    from tqdm import tqdm
+
+    jobs, highway_missing, ray_missing = _jobs(cfg)
+    measured = {"towns": {t: {} for t in cfg.towns}, "highway_env": {}, "scaling": [], "ray_scaling": [], "import": {}}
     started = time.perf_counter()
     with tqdm(jobs, unit="run", disable=not progress, file=sys.stderr) as bar:
         for kind, town, what in bar:
             bar.set_description(f"{kind} {town or ''} {what or ''}".replace("  ", " ").strip())
-            if kind == "raw":
-                towns[town]["raw_sumo"] = measure_raw_sumo(cfg, town)
-            elif kind == "env":
-                towns[town][what] = measure_env(cfg, town, what)
-            elif kind == "highway":
-                highway[what] = measure_highway(what, cfg.highway_seconds)
-            elif kind == "import":
-                imported = measure_import(what)
-            elif kind == "ray":
-                on_ray.append(measure_ray_scaling(cfg, what))
-            else:
-                scaling.append(measure_scaling(cfg, what))
+            _measure(cfg, kind, town, what, measured)
+    towns = measured["towns"]
     result = {
         "machine": machine_info(),
         "config": dataclasses.asdict(cfg),
         "scenario": f"{cfg.suite} {cfg.task} episode {cfg.episode_index}, reset seed 0, expert agent",
         "note": "shared, noisy machine; modest durations; see hbmp_bench.bench for the method",
         "towns": towns,
-        "highway_env": highway,
+        "highway_env": measured["highway_env"],
         "highway_env_skipped": highway_missing,
-        "scaling": scaling,
-        "ray_scaling": on_ray,
+        "scaling": measured["scaling"],
+        "ray_scaling": measured["ray_scaling"],
         "ray_skipped": ray_missing,
-        "import": imported,
+        "import": measured["import"],
         "bench_process_peak_rss_mb": _peak_rss_mb(),
         "wall_s": round(time.perf_counter() - started, 1),
     }

@@ -80,11 +80,9 @@ def name_problems(doc: dict) -> list[str]:
     return problems
 
 
-def check_results(doc: dict, source: str = "results") -> dict:
-    """``doc`` if it is a results file of the installed suite whose ``complete`` and ``sim_errors``
-    agree with its episodes; else a clear error. A format-1 file is read as format 3 with
-    ``privileged`` true, a format 1 or 2 file as unsalted (see :data:`RESULTS_FORMAT`). Everything
-    else a file claims is checked by ``results_check.verify_results``."""
+def _current_format(doc: object, source: str) -> dict:
+    """``doc`` read as a format-:data:`RESULTS_FORMAT` file (an older one upgraded, see there), with the fields
+    every results file has; else a ``UserError`` naming what is missing."""
     if isinstance(doc, dict) and doc.get("format") == 1 and "privileged" not in doc:
         doc = {**doc, "format": 2, "privileged": True}
     if isinstance(doc, dict) and doc.get("format") == 2:
@@ -98,6 +96,16 @@ def check_results(doc: dict, source: str = "results") -> dict:
     episodes = doc.get("episodes")
     if not isinstance(episodes, list) or not all(isinstance(e, dict) for e in episodes):
         raise UserError(f"{source} has no list of episodes")
+    return doc
+
+
+def check_results(doc: dict, source: str = "results") -> dict:
+    """``doc`` if it is a results file of the installed suite whose ``complete`` and ``sim_errors``
+    agree with its episodes; else a clear error. A format-1 file is read as format 3 with
+    ``privileged`` true, a format 1 or 2 file as unsalted (see :data:`RESULTS_FORMAT`). Everything
+    else a file claims is checked by ``results_check.verify_results``."""
+    doc = _current_format(doc, source)
+    episodes = doc["episodes"]
     sim_errors = sum(e.get("end_reason") == SIM_ERROR for e in episodes)
     if doc.get("sim_errors") != sim_errors:
         raise UserError(f"{source} says sim_errors={doc.get('sim_errors')!r} but its episodes hold {sim_errors}")

@@ -102,39 +102,16 @@ class TrainingRunning(Busy):
 
 def _cmd_train(args: argparse.Namespace) -> int:
     from hbmp_bench.training.run import RunConfig
-    from hbmp_bench.training.worker import WorkerEnvConfig
 
     kind = args.kind
     if args.episodes is None:
         args.episodes = DEFAULT_EPISODES[kind]
     if args.out is None:
         args.out = os.path.join("runs", f"{kind}__{args.scenario.split('/')[-1]}__{args.seed}__{int(time.time())}")
-    if args.validate_every and kind == "il":
-        raise UserError("--validate-every applies to hbmp, hbmp-s and flat (DAgger's rounds.csv has its holdout)")
-    if args.ppo and kind == "il":
-        raise UserError("--ppo options apply to hbmp, hbmp-s and flat (il is trained by DAgger)")
-    if args.ppo and args.resume:
-        raise UserError("a resumed run keeps the PPO options its checkpoint recorded; start a new --out to change "
-                         "them")
+    _check_kind_options(args)
     init = resolve_init(kind, args.init) if args.resume is None else None
     ppo = _ppo_config(args, init) if kind != "il" and args.resume is None else None  # a resume keeps its own
-    source = (args.resume, RUN_OPTIONS) if args.resume else (init, INPUT_OPTIONS) if init else None
-    for name, value in (recorded_env_options(*source) if source else {}).items():
-        if getattr(args, name) is None:
-            setattr(args, name, value)
-    if args.fidelity is None:
-        args.fidelity = DEFAULT_FIDELITY[kind]
-    env_kwargs = {k: v for k, v in (("fidelity", args.fidelity), ("observation", args.observation),
-                                    ("road_profile", args.road_profile), ("density", args.density))
-                  if v is not None}
-    entry_point = None
-    if kind == "flat":
-        if importlib.util.find_spec(CONTROL_ENV.split(":")[0]) is None:
-            raise UserError("train flat needs the continuous-control env hbmp_bench.envs.control_env.ControlEnv, "
-                             "which this installation does not have yet")
-        entry_point = CONTROL_ENV
-    env_config = WorkerEnvConfig(env_id=args.scenario, env_kwargs=env_kwargs, entry_point=entry_point,
-                                 reward=REWARD[kind])
+    env_config = _env_config(args, init)
     run = RunConfig(kind=kind, episodes=args.episodes, out=args.out, workers=args.workers, backend=args.backend,
                     address=args.address, seed=args.seed,
                     save_every=args.save_every, resume=args.resume, command=_command_line(args),
@@ -152,6 +129,42 @@ def _cmd_train(args: argparse.Namespace) -> int:
     print(f"run folder: {args.out}  (episodes.csv, curves.png, checkpoint.pt, MODEL_CARD.md)")
     print(f"policy: {result['policy']}  (evaluate: hbmp-bench run --agent {result['policy']})")
     return 0
+
+
+def _check_kind_options(args: argparse.Namespace) -> None:
+    """Refuse options the run's kind (or a resume) does not take, before anything is read or started."""
+    if args.validate_every and args.kind == "il":
+        raise UserError("--validate-every applies to hbmp, hbmp-s and flat (DAgger's rounds.csv has its holdout)")
+    if args.ppo and args.kind == "il":
+        raise UserError("--ppo options apply to hbmp, hbmp-s and flat (il is trained by DAgger)")
+    if args.ppo and args.resume:
+        raise UserError("a resumed run keeps the PPO options its checkpoint recorded; start a new --out to change "
+                        "them")
+
+
+def _env_config(args: argparse.Namespace, init: str | None):
+    """The workers' environment: the options given, else those the resumed (or ``--init``) checkpoint recorded
+    (``RUN_OPTIONS`` / ``INPUT_OPTIONS``; written back into ``args`` so the model card's command has them), else
+    the kind's defaults."""
+    from hbmp_bench.training.worker import WorkerEnvConfig
+
+    kind = args.kind
+    source = (args.resume, RUN_OPTIONS) if args.resume else (init, INPUT_OPTIONS) if init else None
+    for name, value in (recorded_env_options(*source) if source else {}).items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
+    if args.fidelity is None:
+        args.fidelity = DEFAULT_FIDELITY[kind]
+    env_kwargs = {k: v for k, v in (("fidelity", args.fidelity), ("observation", args.observation),
+                                    ("road_profile", args.road_profile), ("density", args.density))
+                  if v is not None}
+    entry_point = None
+    if kind == "flat":
+        if importlib.util.find_spec(CONTROL_ENV.split(":")[0]) is None:
+            raise UserError("train flat needs the continuous-control env hbmp_bench.envs.control_env.ControlEnv, "
+                            "which this installation does not have yet")
+        entry_point = CONTROL_ENV
+    return WorkerEnvConfig(env_id=args.scenario, env_kwargs=env_kwargs, entry_point=entry_point, reward=REWARD[kind])
 
 
 def _ppo_config(args: argparse.Namespace, init: str | None):
