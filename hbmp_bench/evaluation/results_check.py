@@ -37,7 +37,6 @@ from pathlib import Path
 
 from hbmp_bench.errors import UserError
 from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, driving_score
-from hbmp_bench.metrics.report import scores
 from hbmp_bench.metrics.results_file import EPISODE_COLUMNS, ForgedResultsError, name_problems, results_records
 from hbmp_bench.vocabulary import COLLISION_KINDS, INFRACTION_KINDS, VIOLATION_KINDS
 
@@ -80,6 +79,14 @@ def record_problems(row: dict, *, end_on_violation: bool, end_on_collision: bool
     """Contradictions within one episode row of a results file (the suite's rules given by
     ``end_on_violation``, the paper's protocol, and ``end_on_collision``, NoCrash's)."""
     where = _label(row)
+    shape = _row_shape_problems(row, where)
+    if shape:
+        return shape
+    return [*_outcome_problems(row, where), *_rule_problems(row, where, end_on_violation, end_on_collision)]
+
+
+def _row_shape_problems(row: dict, where: str) -> list[str]:
+    """A missing column, or a value of the wrong type or sign (then nothing else of the row is judged)."""
     missing = [k for k in EPISODE_COLUMNS if k not in row]
     if missing:
         return [f"{where} lacks {missing}"]
@@ -91,6 +98,11 @@ def record_problems(row: dict, *, end_on_violation: bool, end_on_collision: bool
     if bad:
         return [f"{where} has invalid {sorted(set(bad))} (counts and indices: integers >= 0; measures: finite "
                 "numbers >= 0; success, timeout: true or false)"]
+    return []
+
+
+def _outcome_problems(row: dict, where: str) -> list[str]:
+    """The end reason, success, timeout, route completion and driving score of a row against each other."""
     problems = []
     reason = row["end_reason"]
     if reason not in END_REASONS:
@@ -111,6 +123,13 @@ def record_problems(row: dict, *, end_on_violation: bool, end_on_collision: bool
         if abs(expected - row["driving_score"]) > SCORE_TOLERANCE:
             problems.append(f"{where} has driving score {row['driving_score']}, but its route completion and "
                             f"infractions give {expected:.3f}")
+    return problems
+
+
+def _rule_problems(row: dict, where: str, end_on_violation: bool, end_on_collision: bool) -> list[str]:
+    """The row's infraction counts against its end reason and the suite's rules."""
+    problems = []
+    reason = row["end_reason"]
     collisions = sum(row[k] for k in COLLISION_KINDS)
     violations = sum(row[k] for k in VIOLATION_KINDS)
     if reason == "collision" and not collisions:
@@ -131,17 +150,32 @@ def episode_problems(doc: dict, *, against_suite: bool) -> list[str]:
     are not exactly the selection's, and when ``against_suite`` a selection outside the suite's and
     rows that differ from the suite's episode (seed, route length, a duration past its timeout); an imported map
     of this machine counts as one of the suite's towns, its episodes drawn on it."""
-    from hbmp_bench.scenarios import get_suite, suite_episodes
+    from hbmp_bench.scenarios import get_suite
 
     spec = get_suite(doc["suite"])
     selection = doc.get("selection")
     if not isinstance(selection, dict) or not all(isinstance(selection.get(k), list) for k in ("towns", "tasks", "episodes")):
         return ["its selection is not {towns: [...], tasks: [...], episodes: [...]}"]
     towns, tasks, indices = selection["towns"], selection["tasks"], selection["episodes"]
-    problems = []
     if not (all(isinstance(t, str) for t in towns + tasks) and all(isinstance(i, int) and not isinstance(i, bool)
                                                                    for i in indices)):
         return ["its selection names towns and tasks by strings and episodes by integers"]
+    problems = _selection_problems(spec, towns, tasks, indices, against_suite)
+    rows = doc["episodes"]
+    for row in rows:
+        problems += record_problems(row, end_on_violation=spec.end_on_violation, end_on_collision=spec.end_on_collision)
+    if problems:
+        return problems
+    problems = _key_problems(rows, towns, tasks, indices)
+    if problems or not against_suite:
+        return problems
+    return _reference_problems(spec, rows)
+
+
+def _selection_problems(spec, towns: list, tasks: list, indices: list, against_suite: bool) -> list[str]:
+    """A selection whose towns, tasks or episodes are empty or repeat, or (``against_suite``) lie outside the
+    suite's (an imported map of this machine counts as one of its towns)."""
+    problems = []
     for kind, values in (("towns", towns), ("tasks", tasks), ("episodes", indices)):
         if len(set(values)) != len(values) or not values:
             problems.append(f"its selection's {kind} {values} are empty or repeat")
@@ -154,11 +188,12 @@ def episode_problems(doc: dict, *, against_suite: bool) -> list[str]:
         if outside:
             problems.append(f"its selection holds {outside}, not in suite {spec.name!r} (towns {list(spec.towns)}, "
                             f"tasks {list(spec.tasks)}, episodes 0-{spec.episodes_per_task - 1})")
-    rows = doc["episodes"]
-    for row in rows:
-        problems += record_problems(row, end_on_violation=spec.end_on_violation, end_on_collision=spec.end_on_collision)
-    if problems:
-        return problems
+    return problems
+
+
+def _key_problems(rows: list[dict], towns: list, tasks: list, indices: list) -> list[str]:
+    """Episodes that appear more than once or lie outside the selection."""
+    problems = []
     wanted = {(town, task, i) for town in towns for task in tasks for i in indices}
     keys = Counter((r["town"], r["task"], r["episode"]) for r in rows)
     repeated = sorted(k for k, n in keys.items() if n > 1)
@@ -167,8 +202,14 @@ def episode_problems(doc: dict, *, against_suite: bool) -> list[str]:
         problems.append(f"{len(repeated)} episodes appear more than once (e.g. {'/'.join(map(str, repeated[0]))})")
     if extra:
         problems.append(f"{len(extra)} episodes are outside its selection (e.g. {'/'.join(map(str, extra[0]))})")
-    if problems or not against_suite:
-        return problems
+    return problems
+
+
+def _reference_problems(spec, rows: list[dict]) -> list[str]:
+    """Rows whose seed, route length or duration differ from the suite's episode."""
+    from hbmp_bench.scenarios import suite_episodes
+
+    problems = []
     for row in rows:
         reference = suite_episodes(spec.name, row["town"], row["task"])[row["episode"]]
         where = _label(row)
@@ -283,6 +324,8 @@ def verify_results(doc: dict, source: str, *, against_suite: bool = True) -> dic
     if problems:
         raise ForgedResultsError(source, problems)
     selection = doc["selection"]
+    from hbmp_bench.metrics.report import scores  # pandas: loaded where a file is checked, not at import
+
     recomputed = scores(doc["suite"], results_records(doc), towns=selection["towns"], tasks=selection["tasks"],
                         episodes=selection["episodes"], agent=doc["agent"], aggregates=against_suite)
     problems = claim_problems(doc, recomputed)
