@@ -403,19 +403,8 @@ class ExpertAgent:
         if scene["in_junction"]:
             return None, []
         v, offset, d = scene["speed_mps"], scene["route_lane_offset"], scene["stop_distance_m"]
-        gap = scene.get("leader_gap_m", INF)
         if offset == 0:
-            # standing behind a standing obstacle away from junctions: pass it on a lane that also
-            # continues the route
-            standing = v < 0.5 and gap < 15.0 and scene.get("leader_speed_mps", 0.0) < 0.5 and d > 40.0
-            self._stuck_s = self._stuck_s + t.keep_s if standing else 0.0
-            if self._stuck_s > 5.0:
-                for side, action, alpha in ((1, CHANGE_LEFT, road[2]), (-1, CHANGE_RIGHT, road[4])):
-                    if mask[action] and alpha > 0.5 and self._lane_free(occupancy, side, v) and \
-                            self._lane_change_safe(scene, targets, t):
-                        self._stuck_s = 0.0
-                        return action, []
-            return None, []
+            return self._pass_standing_obstacle(scene, occupancy, mask, t, road, targets), []
         action = CHANGE_LEFT if offset > 0 else CHANGE_RIGHT
         if mask[action] and self._lane_free(occupancy, 1 if offset > 0 else -1, v) and self._lane_change_safe(scene, targets, t):
             return action, []
@@ -427,6 +416,22 @@ class ExpertAgent:
         room = 16.0 if t.keep_s > 0.2 else 12.0
         d = min(d, scene.get("goal_distance_m", INF) - EGO_LENGTH_M / 2)
         return None, ([Target(d - room, 0.0, "route_lane", hard=True)] if d - room > 0.0 else [])
+
+    def _pass_standing_obstacle(self, scene: dict, occupancy: np.ndarray, mask: np.ndarray, t: Timing,
+                                road: np.ndarray, targets: list[Target]) -> int | None:
+        """On the route's lane, standing behind a standing obstacle away from junctions for over 5 s: a lane
+        change past it onto a lane that also continues the route, where one is free and safe (None: wait)."""
+        v, d = scene["speed_mps"], scene["stop_distance_m"]
+        gap = scene.get("leader_gap_m", INF)
+        standing = v < 0.5 and gap < 15.0 and scene.get("leader_speed_mps", 0.0) < 0.5 and d > 40.0
+        self._stuck_s = self._stuck_s + t.keep_s if standing else 0.0
+        if self._stuck_s > 5.0:
+            for side, action, alpha in ((1, CHANGE_LEFT, road[2]), (-1, CHANGE_RIGHT, road[4])):
+                if mask[action] and alpha > 0.5 and self._lane_free(occupancy, side, v) and \
+                        self._lane_change_safe(scene, targets, t):
+                    self._stuck_s = 0.0
+                    return action
+        return None
 
     def _lane_change_safe(self, scene: dict, targets: list[Target], t: Timing) -> bool:
         """Whether a lane change (at least ``min_lane_change_speed``, held for a whole behavior)
