@@ -353,7 +353,9 @@ class EgoEnv(EgoView):
     its own instance of ``background_policy`` (an agent name or ``module:Class``, see
     :func:`hbmp_bench.agents.load_agent`), and the parallel env is stepped until the ego needs its
     next decision or its episode ends. Rewards, ends and infos are the ego's. Made by :func:`ego_env`;
-    arguments as :class:`TrafficParallelEnv`.
+    arguments as :class:`TrafficParallelEnv` (``max_cycles`` counts the parallel env's steps, which
+    any agent's decision ends, not the ego's). A copy is made before its first reset, as the
+    parallel env's.
     """
 
     def __init__(self, background_policy: str = "expert", **kwargs):
