@@ -462,58 +462,70 @@ class EpisodePool:
         while len(self._slots) < min(self.workers, len(pending)):
             self._slots.append(_Slot(self.ctx, self.limits, self._leases))
         while pending or any(s.task is not None for s in self._slots):
-            for slot in self._slots:
-                while slot.task is None and pending:
-                    task = pending.popleft()
-                    attempts[task] = attempts.get(task, 0) + 1
-                    env = self.agent_env(task.agent)
-                    if isinstance(env, str):
-                        yield EpisodeOutcome(blank_record(task, AGENT_ERROR, env), attempts[task], 0.0, 0.0)
-                        continue
-                    slot.run(task, env)
+            yield from self._start_free(pending, attempts)
             busy = {s.conn: s for s in self._slots if s.task is not None}
             for conn in wait(list(busy), timeout=POLL_S):
-                slot = busy[conn]
-                try:
-                    kind, payload = conn.recv()
-                except (EOFError, OSError):
-                    task, agents_turn = slot.task, slot.agents_turn()
-                    reason = f"env process died ({slot.exit_codes()})"
-                    slot.stop(graceful=False)
-                    if agents_turn:
-                        yield self._agents_fault(task, reason, attempts)
-                    else:
-                        yield from self._sim_failure(task, reason, attempts, pending)
+                yield from self._heard(conn, busy[conn], attempts, pending)
+            yield from self._watchdog(attempts, pending)
+
+    def _start_free(self, pending: deque, attempts: dict) -> Iterator[EpisodeOutcome]:
+        """Start the next tasks in the free slots (a task whose agent's env options are refused ends at once)."""
+        for slot in self._slots:
+            while slot.task is None and pending:
+                task = pending.popleft()
+                attempts[task] = attempts.get(task, 0) + 1
+                env = self.agent_env(task.agent)
+                if isinstance(env, str):
+                    yield EpisodeOutcome(blank_record(task, AGENT_ERROR, env), attempts[task], 0.0, 0.0)
                     continue
-                slot.last_seen = time.monotonic()
-                slot.heard_from = True
-                if kind == "done":
-                    task = slot.task
-                    slot.task = None
-                    failed = payload["status"] == AGENT_ERROR
-                    code = slot.end_agent(wait_s=1.0 if failed else 0.0)
-                    if payload["restart"]:
-                        slot.stop(graceful=False)
-                    if payload["status"] == SIM_ERROR:
-                        yield from self._sim_failure(task, payload["record"]["error"], attempts, pending)
-                        continue
-                    record = EpisodeRecord(**payload["record"])
-                    if failed and code:
-                        record = dataclasses.replace(record, error=f"{record.error}\n({exit_note(code, self.limits)})")
-                    record = self._with_attempts(record, task)
-                    yield EpisodeOutcome(record, attempts[task], payload["max_decision_s"], payload["mean_decision_s"])
-            now = time.monotonic()
-            for slot in self._slots:
-                allowance = slot.silent_for(now) if slot.task is not None else None
-                if allowance is not None:
-                    task, agents_turn = slot.task, slot.agents_turn()
-                    what = "no progress from the simulation" if slot.heard_from else "the env process did not start"
-                    slot.stop(graceful=False)
-                    reason = f"watchdog: {what} for {allowance:g} s; env process killed"
-                    if agents_turn:
-                        yield self._agents_fault(task, reason, attempts)
-                    else:
-                        yield from self._sim_failure(task, reason, attempts, pending)
+                slot.run(task, env)
+
+    def _heard(self, conn, slot: _Slot, attempts: dict, pending: deque) -> Iterator[EpisodeOutcome]:
+        """What a slot's env process sent (its outcome once it is done), or its death."""
+        try:
+            kind, payload = conn.recv()
+        except (EOFError, OSError):
+            task, agents_turn = slot.task, slot.agents_turn()
+            reason = f"env process died ({slot.exit_codes()})"
+            slot.stop(graceful=False)
+            if agents_turn:
+                yield self._agents_fault(task, reason, attempts)
+            else:
+                yield from self._sim_failure(task, reason, attempts, pending)
+            return
+        slot.last_seen = time.monotonic()
+        slot.heard_from = True
+        if kind != "done":
+            return
+        task = slot.task
+        slot.task = None
+        failed = payload["status"] == AGENT_ERROR
+        code = slot.end_agent(wait_s=1.0 if failed else 0.0)
+        if payload["restart"]:
+            slot.stop(graceful=False)
+        if payload["status"] == SIM_ERROR:
+            yield from self._sim_failure(task, payload["record"]["error"], attempts, pending)
+            return
+        record = EpisodeRecord(**payload["record"])
+        if failed and code:
+            record = dataclasses.replace(record, error=f"{record.error}\n({exit_note(code, self.limits)})")
+        record = self._with_attempts(record, task)
+        yield EpisodeOutcome(record, attempts[task], payload["max_decision_s"], payload["mean_decision_s"])
+
+    def _watchdog(self, attempts: dict, pending: deque) -> Iterator[EpisodeOutcome]:
+        """Kill the env processes silent past their allowance; the episode is the agent's failure if it had the turn."""
+        now = time.monotonic()
+        for slot in self._slots:
+            allowance = slot.silent_for(now) if slot.task is not None else None
+            if allowance is not None:
+                task, agents_turn = slot.task, slot.agents_turn()
+                what = "no progress from the simulation" if slot.heard_from else "the env process did not start"
+                slot.stop(graceful=False)
+                reason = f"watchdog: {what} for {allowance:g} s; env process killed"
+                if agents_turn:
+                    yield self._agents_fault(task, reason, attempts)
+                else:
+                    yield from self._sim_failure(task, reason, attempts, pending)
 
     def _agents_fault(self, task: EpisodeTask, reason: str, attempts: dict) -> EpisodeOutcome:
         """The env process died or stalled while the agent had the turn: the simulator was idle,

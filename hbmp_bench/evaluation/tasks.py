@@ -128,6 +128,12 @@ class RunnerLimits:
     episode_wall_extra_s: float = 120.0
 
     def __post_init__(self):
+        self._check_agent_resources()
+        self._check_agent_files()
+        self._check_run()
+
+    def _check_agent_resources(self) -> None:
+        """Timeouts, the agent process's resource limits and its user."""
         for name in ("decision_timeout_s", "agent_start_timeout_s", "start_timeout_s", "watchdog_s"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"{name} must be > 0, got {getattr(self, name)}")
@@ -137,6 +143,10 @@ class RunnerLimits:
                 raise ConfigError(f"{name} must be a positive integer or None, got {value!r}")
         if self.agent_user is not None and (not isinstance(self.agent_user, str) or not self.agent_user.strip()):
             raise ConfigError(f"agent_user must be a user name or None, got {self.agent_user!r}")
+
+    def _check_agent_files(self) -> None:
+        """What the agent process preloads, whether it is trusted, and its environment variables and paths
+        (as tuples)."""
         object.__setattr__(self, "agent_preload", tuple(self.agent_preload))
         if not isinstance(self.trust_agent, bool):
             raise ConfigError(f"trust_agent must be True or False, got {self.trust_agent!r}")
@@ -149,6 +159,9 @@ class RunnerLimits:
             relative = [p for p in getattr(self, name) if not os.path.isabs(p)]
             if relative:
                 raise ConfigError(f"{name} must name absolute paths, got {relative}")
+
+    def _check_run(self) -> None:
+        """The episode's wall limit, the preloaded module names, retries, the decision cap and the env."""
         if not self.episode_wall_factor > 0 or not self.episode_wall_extra_s >= 0:
             raise ConfigError(f"episode_wall_factor must be > 0 and episode_wall_extra_s >= 0, got "
                              f"{self.episode_wall_factor} and {self.episode_wall_extra_s}")

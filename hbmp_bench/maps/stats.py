@@ -52,51 +52,56 @@ def net_stats(path: str | Path) -> dict:
     timing ``tls_*_s`` ([min, max], s).
     """
     root = ET.parse(path).getroot()
-    length = 0.0
-    drivable = 0
-    lane_length = 0.0
-    lanes_per_edge: Counter[int] = Counter()
-    walkable = 0
-    sidewalks = False
-    crossings = 0
-    for edge in root.iter("edge"):
-        function = edge.get("function", "normal")
-        if function == "crossing":
-            crossings += 1
-        if function != "normal":
-            continue
-        lanes = edge.findall("lane")
-        sidewalks = sidewalks or any(_is_sidewalk(ln) for ln in lanes)
-        walkable += any(allows(ln, "pedestrian") for ln in lanes)
-        vehicle = [ln for ln in lanes if is_car_lane(ln, edge)]
-        if not vehicle:
-            continue
-        drivable += 1
-        lanes_per_edge[len(vehicle)] += 1
-        length += sum(float(ln.get("length")) for ln in vehicle) / len(vehicle)
-        lane_length += sum(float(ln.get("length")) for ln in vehicle)
-
+    edges = _edge_stats(root)
+    length, lane_length, lanes_per_edge = edges.pop("length"), edges.pop("lane_length"), edges.pop("lanes_per_edge")
     types = Counter(j.get("type") for j in root.iter("junction"))
-    extent = [0.0, 0.0]
-    loc = root.find("location")
-    if loc is not None and loc.get("convBoundary"):
-        x0, y0, x1, y1 = (float(v) for v in loc.get("convBoundary").split(","))
-        extent = [round(x1 - x0, 2), round(y1 - y0, 2)]
     return {
         "directed_road_length_m": round(length, 2),
         "driving_lane_length_m": round(lane_length, 2),
-        "drivable_edges": drivable,
+        "drivable_edges": edges["drivable"],
         "lanes_per_edge": {str(k): lanes_per_edge[k] for k in sorted(lanes_per_edge)},
         "lanes_per_edge_mean": round(lane_length / length, 3) if length > 0 else 0.0,
         "tls_junctions": sum(types[t] for t in TLS_TYPES),
         "priority_junctions": sum(types[t] for t in PRIORITY_TYPES),
         "roundabouts": len(root.findall("roundabout")),
-        "extent_m": extent,
-        "has_sidewalks": sidewalks,
-        "walkable_edges": walkable,
-        "crossings": crossings,
+        "extent_m": _extent(root),
+        "has_sidewalks": edges["sidewalks"],
+        "walkable_edges": edges["walkable"],
+        "crossings": edges["crossings"],
         **{f"tls_{key}": value for key, value in signal_stats(path).items()},
     }
+
+
+def _edge_stats(root) -> dict:
+    """Over the normal edges of a net's XML root: directed road length and driving lane length [m], drivable
+    edges, lanes per drivable edge (a Counter), walkable edges, whether any has a sidewalk; and the crossings."""
+    out = {"length": 0.0, "lane_length": 0.0, "drivable": 0, "lanes_per_edge": Counter(), "walkable": 0,
+           "sidewalks": False, "crossings": 0}
+    for edge in root.iter("edge"):
+        function = edge.get("function", "normal")
+        out["crossings"] += function == "crossing"
+        if function != "normal":
+            continue
+        lanes = edge.findall("lane")
+        out["sidewalks"] = out["sidewalks"] or any(_is_sidewalk(ln) for ln in lanes)
+        out["walkable"] += any(allows(ln, "pedestrian") for ln in lanes)
+        vehicle = [ln for ln in lanes if is_car_lane(ln, edge)]
+        if not vehicle:
+            continue
+        out["drivable"] += 1
+        out["lanes_per_edge"][len(vehicle)] += 1
+        out["length"] += sum(float(ln.get("length")) for ln in vehicle) / len(vehicle)
+        out["lane_length"] += sum(float(ln.get("length")) for ln in vehicle)
+    return out
+
+
+def _extent(root) -> list[float]:
+    """[width, height] [m] of a net's ``convBoundary`` ([0, 0] without one)."""
+    loc = root.find("location")
+    if loc is not None and loc.get("convBoundary"):
+        x0, y0, x1, y1 = (float(v) for v in loc.get("convBoundary").split(","))
+        return [round(x1 - x0, 2), round(y1 - y0, 2)]
+    return [0.0, 0.0]
 
 
 def _cell(value) -> str:
