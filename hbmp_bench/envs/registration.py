@@ -18,18 +18,34 @@ TRAINING_ID = "hbmp_bench/Training-v0"
 
 SCENARIO_SUITE = "scenarios"
 """The suite of the scenario types' env ids (``hbmp_bench/Town03-HardBrake-v0``)."""
+SCENARIO_TOWNS: dict[str, tuple[str, ...]] = {
+    "HardBrake": TOWNS,
+    "CutIn": ("Town03", "Town04"),
+    "PedestrianStepsOut": ("Town01", "Town02", "Town03", "Town04"),
+    "UnprotectedLeft": TOWNS,
+    "GiveWay": ("Town01", "Town02", "Town03", "Town05"),
+    "RedLightRunner": ("Town01", "Town03", "Town04", "Town05"),
+    "Merge": TOWNS,
+    "LongRoute": TOWNS,
+}
+"""The built-in towns whose ``scenarios`` episode list holds each scenario type (a cut-in needs two lanes one
+way, a pedestrian a sidewalk, a red-light runner a signalised crossing): those get an id. Known without
+loading a network, so that ``import hbmp_bench`` stays light; a test checks it against the episode lists."""
+
+
+def _tasks(town: str) -> tuple[str, ...]:
+    return (*TASKS, *(t for t in SCENARIO_TYPES if town in SCENARIO_TOWNS.get(t, ())))
 
 
 def env_ids() -> tuple[str, ...]:
-    """Every registered id of the package: town × task, town × scenario type (an id of a type its town
-    cannot host fails at construction, naming the towns that can), and the training id."""
-    return tuple(f"hbmp_bench/{town}-{task}-v0" for town in TOWNS for task in (*TASKS, *SCENARIO_TYPES)) + (TRAINING_ID,)
+    """Every registered id of the package: town × task, town × each scenario type it hosts, the training id."""
+    return tuple(f"hbmp_bench/{town}-{task}-v0" for town in TOWNS for task in _tasks(town)) + (TRAINING_ID,)
 
 
 def register_envs() -> None:
     """Register every id (idempotent)."""
     for town in TOWNS:
-        for task in (*TASKS, *SCENARIO_TYPES):
+        for task in _tasks(town):
             env_id = f"hbmp_bench/{town}-{task}-v0"
             kwargs = {"town": town, "task": task, **({"suite": SCENARIO_SUITE} if task in SCENARIO_TYPES else {})}
             if env_id not in gym.registry:

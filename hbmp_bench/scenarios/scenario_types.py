@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from hbmp_bench.scenarios.spec import Episode
+from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS, Episode
 
 if TYPE_CHECKING:
     from hbmp_bench.maps.roadnet import RoadNetwork
@@ -464,6 +464,7 @@ class ScenarioType:
         density: the background traffic of its episodes (``suites.DENSITIES``), None: the suite's.
         max_episodes: at most this many episodes per town (None: the suite's ``episodes_per_task``): a
             type whose episodes are long (several km) costs as much with fewer.
+        min_length_factor: its routes are at least this times the town's mean Navigation route long.
     """
 
     name: str
@@ -475,6 +476,7 @@ class ScenarioType:
     route_legs: int = 1
     density: str | None = None
     max_episodes: int | None = None
+    min_length_factor: float = 0.0
 
 
 SCENARIO_TYPES: dict[str, ScenarioType] = {}
@@ -482,8 +484,6 @@ SCENARIO_TYPES: dict[str, ScenarioType] = {}
 
 def register_scenario_type(kind: ScenarioType) -> ScenarioType:
     """Add a scenario type: a task name of its own (labelled by its name in reports)."""
-    from hbmp_bench.scenarios.spec import TASK_LABELS, TASKS
-
     if kind.name in SCENARIO_TYPES or kind.name in TASKS:
         raise ValueError(f"scenario type {kind.name!r} is already registered")
     SCENARIO_TYPES[kind.name] = kind
@@ -493,8 +493,6 @@ def register_scenario_type(kind: ScenarioType) -> ScenarioType:
 
 def all_tasks() -> tuple[str, ...]:
     """Every task name in report order: the CoRL2017 task categories, then the scenario types."""
-    from hbmp_bench.scenarios.spec import TASKS
-
     return (*TASKS, *SCENARIO_TYPES)
 
 
@@ -532,15 +530,9 @@ register_scenario_type(ScenarioType(
     Merge, "A merge without a light into a road with a dense stream of cars (an on-ramp in Town04)."))
 register_scenario_type(ScenarioType(
     "LongRoute", "Navigation", "Navigation",
-    lambda net, ep: ep.route_length_m >= 2.0 * _navigation_mean_m(ep.town) and ep.turns >= 3,
+    lambda net, ep: ep.turns >= 3,
     Script, "A route of several shortest routes chained (twice a Navigation route or more, 3+ turns) in "
-    "regular traffic.", route_legs=4, density="regular", max_episodes=2))
-
-
-def _navigation_mean_m(town: str) -> float:
-    from hbmp_bench.scenarios.suites import mean_route_lengths
-
-    return mean_route_lengths(town)[2]
+    "regular traffic.", route_legs=4, density="regular", max_episodes=2, min_length_factor=2.0))
 
 
 def check_scenario_type(name: str) -> ScenarioType:

@@ -64,9 +64,12 @@ SUITES: dict[str, Suite] = {}
 
 
 def register_suite(suite: Suite) -> Suite:
-    """Add a suite to the registry (names are unique)."""
+    """Add a suite to the registry (names are unique; its tasks are task categories or scenario types)."""
     if suite.name in SUITES:
         raise ValueError(f"suite {suite.name!r} is already registered")
+    unknown = [t for t in suite.tasks if t not in TASKS and t not in SCENARIO_TYPES]
+    if unknown:
+        raise UnknownNameError("task", unknown[0], (*TASKS, *SCENARIO_TYPES))
     SUITES[suite.name] = suite
     return suite
 
@@ -502,9 +505,13 @@ def _scenario_episodes(suite: Suite, town: str, kind: ScenarioType) -> tuple[Epi
         def draw(rng, i=i):
             seed = _seed(suite.seed, town, kind.name, i) % (2**31)
             if kind.route_legs > 1:
-                return sample_chained_episode(town, kind.route_legs, rng, suite=suite, index=i, seed=seed,
-                                              traffic=traffic)
-            return sample_episode(town, kind.pose_task, rng, suite=suite, index=i, seed=seed, traffic=traffic)
+                episode = sample_chained_episode(town, kind.route_legs, rng, suite=suite, index=i, seed=seed,
+                                                 traffic=traffic)
+            else:
+                episode = sample_episode(town, kind.pose_task, rng, suite=suite, index=i, seed=seed, traffic=traffic)
+            if episode.route_length_m < kind.min_length_factor * mean_route_lengths(town)[2]:
+                raise ValueError("shorter than the type's routes")
+            return episode
         try:
             episodes.append(scenario_episode(draw, kind, net, np.random.default_rng(_seed(suite.seed, town, kind.name, i))))
         except ValueError:

@@ -392,3 +392,18 @@ def test_the_expert_drives_real_episodes_lawfully(town, task, episode, fidelity)
 def test_route_lane_changes_while_cruising_a_little_above_the_cruise_speed():
     # event fidelity: speed_up steps overshoot the cruise speed (12.5 m/s) by a few tenths
     assert act(route_lane_offset=-1, speed_mps=13.3, fidelity="event", duration_s=0.1) == CHANGE_RIGHT
+
+
+def test_the_expert_yields_to_a_foe_that_speeds_at_its_red():
+    """A foe held by its red is passed, unless it comes at it well over its limit (it will run it)."""
+    from hbmp_bench.agents.expert import ExpertAgent
+
+    expert = ExpertAgent()
+    foe = {"ego_dist_m": 20.0, "ego_exit_m": 24.0, "foe_dist_m": 30.0, "foe_exit_m": 34.0, "foe_speed_mps": 17.0,
+           "ego_yields": False, "foe_yields": True, "foe_signal": "r", "foe_speeding": False}
+    scene = {"in_junction": False, "stop_distance_m": 15.0, "junction_foes": (foe,)}
+    timing = None  # the yield rule reads the scene only
+    assert expert._rule_yield(scene, timing) == []
+    scene["junction_foes"] = ({**foe, "foe_speeding": True},)
+    (target,) = expert._rule_yield(scene, timing)
+    assert target.speed_mps == 0.0 and target.at_m < 20.0

@@ -208,8 +208,13 @@ def test_junction_foes_measures_both_cars_to_the_conflict_area():
     (approaching, inside), = [junction_foes(10.0, "g", "o", [conflict], [(("v1", 20.0, 8.0), ("v2", -2.0, 5.0))],
                                             ["G"])]
     assert approaching == {"ego_dist_m": 16.0, "ego_exit_m": 19.0, "foe_dist_m": 24.0, "foe_exit_m": 27.5,
-                           "foe_speed_mps": 8.0, "ego_yields": True, "foe_yields": False, "foe_signal": "G"}
+                           "foe_speed_mps": 8.0, "ego_yields": True, "foe_yields": False, "foe_signal": "G",
+                           "foe_speeding": False}
     assert inside["foe_dist_m"] == 2.0 and inside["foe_signal"] == ""  # inside the junction: its light is behind it
+    # a foe well over its lane's limit (1.2 x) is speeding: a red will not hold it (scenario RedLightRunner)
+    (fast, slow), = [junction_foes(10.0, "g", "o", [conflict], [(("v1", 20.0, 16.0), ("v2", 20.0, 13.0))], ["r"],
+                                   [12.5])]
+    assert fast["foe_speeding"] and not slow["foe_speeding"]
 
 
 def _drive(privileged: bool, actions: list[int] | None = None, decisions: int = 300) -> tuple[list, list, list]:

@@ -181,3 +181,15 @@ def test_long_routes_chain_several_shortest_routes_without_driving_an_edge_twice
             assert ep.route_length_m >= 2.0 * mean_route_lengths(town)[2] and ep.turns >= 3
             assert len(set(ep.route)) == len(ep.route)
             assert road_network(town).route_drivable(ep.route, ep.start_lane, ep.start_pos, ep.goal_lane, ep.goal_pos)
+
+
+def test_each_type_has_an_env_id_in_the_towns_that_host_it():
+    from hbmp_bench.envs.registration import SCENARIO_SUITE, SCENARIO_TOWNS, env_ids
+    from hbmp_bench.maps import TOWNS
+
+    assert set(SCENARIO_TOWNS) == set(SCENARIO_TYPES)
+    for name in SCENARIO_TYPES:
+        hosts = tuple(t for t in TOWNS if suite_episodes(SCENARIO_SUITE, t, name))
+        assert SCENARIO_TOWNS[name] == hosts, name
+        assert {f"hbmp_bench/{t}-{name}-v0" for t in hosts} <= set(env_ids())
+        assert not {f"hbmp_bench/{t}-{name}-v0" for t in TOWNS if t not in hosts} & set(env_ids())
