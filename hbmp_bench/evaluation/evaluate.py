@@ -27,6 +27,7 @@ import time
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from hbmp_bench.errors import ConfigError, Interrupted, UnknownNameError, UserError
 from hbmp_bench.evaluation.channel import AgentDescription
@@ -196,12 +197,7 @@ def evaluate(
         raise UnknownNameError("backend", backend, BACKENDS)
     _check_workers(workers)
     selection = suite_tasks(suite, agent, towns=towns, tasks=tasks, episodes=episodes, fidelity=fidelity)
-    from hbmp_bench.agents import AGENTS
-
-    if agent not in AGENTS and not agent.endswith(".pt") and ":" not in agent:  # as load_agent says, before any file
-        raise UnknownNameError("agent", agent, [*AGENTS, "<module:Class>", "<path/to/checkpoint.pt>"])
-    if agent.endswith(".pt") and agent not in AGENTS and not os.path.isfile(agent):
-        raise AgentBuildError(f"agent could not be built: no checkpoint file {agent!r}")
+    _check_agent_spec(agent)
     path = Path(path) if path is not None else records_path(out_dir, selection[0].suite, agent, salted)
     path.parent.mkdir(parents=True, exist_ok=True)
     with records_lock(path):
@@ -210,55 +206,100 @@ def evaluate(
         selection = [dataclasses.replace(t, salt=salt) for t in selection]
         # before any agent code runs: only records this evaluator sealed are resumed, and the
         # records file, its provenance and the ledger exist and are noted
-        side = provenance_path(path)
-        seal = RecordsSeal(path, side)
-        seal.check_resumable()
-        repair_records(path)
-        created = not path.exists()
-        if created:
-            os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
-        ledger = RecordsLedger(path)
-        noted_side = side.read_bytes() if side.exists() else None
-        try:
-            description = describe_agent(agent, limits)  # the agent's code runs (in its sandbox) from here on
-        except BaseException:
-            if created and path.exists() and path.stat().st_size == 0:  # a bad agent leaves no records file
-                path.unlink()
-            raise
-        ledger.verified()
-        if (side.read_bytes() if side.exists() else None) != noted_side:
-            moved = quarantine(side)
-            raise TamperedError(f"{side} changed while the agent was built: something other than the evaluator wrote "
-                                f"it{f' (moved to {moved.name})' if moved else ''}; evaluate again")
+        seal, side, created, ledger = _open_records(path)
+        description = _describe_watched(agent, limits, path, created, side, ledger)
         limits = with_agent_env(limits, description)
         fingerprint = description.fingerprint
         check_provenance(path, agent, fingerprint, sorted({t.town for t in selection}))
         seal.write()
         finished = {r.key for r in latest_per_key(ledger.records()) if r.end_reason != SIM_ERROR}
         todo = [t for t in selection if t.key not in finished]
-        if salt and todo and keeper.revealed:
-            raise UserError(f"the salt of {path} is revealed, so its episodes could be rebuilt: a salted evaluation "
-                            f"of more episodes goes into another folder (--out)")
+        _check_salt_kept(path, keeper, salt, todo)
         start = time.perf_counter()
-        ran = 0
-        try:
-            for outcome in iter_outcomes(todo, workers=workers, backend=backend, address=address, limits=limits,
-                                         progress=progress, descriptions={agent: description}):
-                ledger.append(outcome.record)
-                seal.write()
-                ran += 1
-        except KeyboardInterrupt:  # the pool has ended its processes on the way out
-            kept = len(selection) - len(todo) + ran
-            raise EvaluationInterrupted(path, kept, len(selection)) from None
+        ran = _record_outcomes(todo, ledger, seal, kept_before=len(selection) - len(todo), total=len(selection),
+                               workers=workers, backend=backend, address=address, limits=limits, progress=progress,
+                               descriptions={agent: description})
         records = ledger.records()
         done = {r.key for r in records if r.end_reason != SIM_ERROR}
         revealed = keeper.reveal() if salt and all(t.key in done for t in selection) else ""
-    wanted = {t.key: k for k, t in enumerate(selection)}
-    records = sorted((r for r in latest_per_key(records) if r.key in wanted), key=lambda r: wanted[r.key])
+    records = _in_selection_order(records, selection)
     return EvaluationResult(path, tuple(records), ran, len(selection) - len(todo), time.perf_counter() - start,
                             len(selection) - len(records), privileged=is_privileged(limits),
                             agent_fingerprint=fingerprint, salt_commitment=commitment(salt) if salt else "",
                             salt=revealed)
+
+
+def _check_salt_kept(path: Path, keeper: SaltKeeper, salt: str, todo: Sequence[EpisodeTask]) -> None:
+    """A salted records file whose salt is revealed takes no further episode: they could be rebuilt."""
+    if salt and todo and keeper.revealed:
+        raise UserError(f"the salt of {path} is revealed, so its episodes could be rebuilt: a salted evaluation "
+                        f"of more episodes goes into another folder (--out)")
+
+
+def _in_selection_order(records: Sequence[EpisodeRecord], selection: Sequence[EpisodeTask]) -> list[EpisodeRecord]:
+    """The latest record of each selected episode, in the selection's order."""
+    wanted = {t.key: k for k, t in enumerate(selection)}
+    return sorted((r for r in latest_per_key(records) if r.key in wanted), key=lambda r: wanted[r.key])
+
+
+def _open_records(path: Path):
+    """Before any agent code runs: only records this evaluator sealed are resumed, and the records file, its
+    provenance file and the ledger exist and are noted. (seal, provenance path, whether the records file was
+    created now, ledger)."""
+    side = provenance_path(path)
+    seal = RecordsSeal(path, side)
+    seal.check_resumable()
+    repair_records(path)
+    created = not path.exists()
+    if created:
+        os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+    return seal, side, created, RecordsLedger(path)
+
+
+def _record_outcomes(todo: list, ledger: RecordsLedger, seal: RecordsSeal, *, kept_before: int, total: int,
+                     **run: Any) -> int:
+    """Run ``todo`` (``run``: :func:`iter_outcomes`' options), appending each outcome to the ledger and
+    resealing; the number run. Ctrl-C raises :class:`EvaluationInterrupted` with the records kept."""
+    ran = 0
+    try:
+        for outcome in iter_outcomes(todo, **run):
+            ledger.append(outcome.record)
+            seal.write()
+            ran += 1
+    except KeyboardInterrupt:  # the pool has ended its processes on the way out
+        raise EvaluationInterrupted(ledger.path, kept_before + ran, total) from None
+    return ran
+
+
+def _check_agent_spec(agent: str) -> None:
+    """Refuse, before any file is written, an agent that :func:`~hbmp_bench.agents.load_agent` would not
+    find: no registry name, plug-in path or checkpoint (a ``.pt`` path must be a file)."""
+    from hbmp_bench.agents import AGENTS
+
+    if agent not in AGENTS and not agent.endswith(".pt") and ":" not in agent:  # as load_agent says, before any file
+        raise UnknownNameError("agent", agent, [*AGENTS, "<module:Class>", "<path/to/checkpoint.pt>"])
+    if agent.endswith(".pt") and agent not in AGENTS and not os.path.isfile(agent):
+        raise AgentBuildError(f"agent could not be built: no checkpoint file {agent!r}")
+
+
+def _describe_watched(agent: str, limits: RunnerLimits, path: Path, created: bool, side: Path,
+                      ledger: RecordsLedger):
+    """Build the agent once in its sandbox (:func:`describe_agent`) while the records file, its ledger and
+    its provenance ``side`` file are watched: a bad agent leaves no records file the evaluator ``created``,
+    and a records or provenance file changed meanwhile is refused (``TamperedError``)."""
+    noted_side = side.read_bytes() if side.exists() else None
+    try:
+        description = describe_agent(agent, limits)  # the agent's code runs (in its sandbox) from here on
+    except BaseException:
+        if created and path.exists() and path.stat().st_size == 0:  # a bad agent leaves no records file
+            path.unlink()
+        raise
+    ledger.verified()
+    if (side.read_bytes() if side.exists() else None) != noted_side:
+        moved = quarantine(side)
+        raise TamperedError(f"{side} changed while the agent was built: something other than the evaluator wrote "
+                            f"it{f' (moved to {moved.name})' if moved else ''}; evaluate again")
+    return description
 
 
 def provenance_path(path: Path) -> Path:

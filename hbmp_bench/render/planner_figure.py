@@ -200,12 +200,9 @@ def _band(shape: np.ndarray, width: float) -> np.ndarray:
     return np.concatenate([offset_polyline(shape, width / 2), offset_polyline(shape, -width / 2)[::-1]])
 
 
-def _draw_scene(ax, situation: PlannerSituation, plans: dict[Behavior, BehaviorPlan], planner: PlannerConfig,
-                x_range: tuple[float, float]) -> None:
-    from matplotlib.colors import to_rgb
-    from matplotlib.lines import Line2D
+def _draw_road(ax, situation: PlannerSituation) -> None:
+    """Walkways, junctions, road surfaces and lane markings, in the ego's frame."""
     from matplotlib.patches import Polygon
-    import matplotlib.patheffects as pe
 
     ego = situation.ego
     for shape, width in situation.walkways:
@@ -220,8 +217,13 @@ def _draw_scene(ax, situation: PlannerSituation, plans: dict[Behavior, BehaviorP
             xy = _to_ego(piece, ego)
             ax.plot(xy[:, 0], xy[:, 1], color="#f0c020" if kind == "centre" else "white",
                     lw=1.6 if kind == "centre" else 1.0, zorder=2, solid_capstyle="butt")
-    obs = situation.obstacles
-    horizon = float(planner.horizon)
+
+
+def _draw_obstacles(ax, situation: PlannerSituation, horizon: float) -> None:
+    """Every obstacle now (filled) and at the planner's horizon at its speed (dashed), with its speed."""
+    from matplotlib.patches import Polygon
+
+    ego, obs = situation.ego, situation.obstacles
     for k in range(len(obs)):
         for t, alpha, ls in ((0.0, 1.0, "-"), (horizon, 0.35, "--")):
             x = obs.x[k] + obs.v[k] * math.cos(obs.yaw[k]) * t
@@ -231,6 +233,14 @@ def _draw_scene(ax, situation: PlannerSituation, plans: dict[Behavior, BehaviorP
                                  ec="#202024", ls=ls, alpha=alpha, lw=1.0, zorder=6))
         ax.annotate(f"{obs.v[k]:.0f} m/s", _to_ego(np.array([obs.x[k], obs.y[k]]), ego), xytext=(0, 12),
                     textcoords="offset points", ha="center", fontsize=7, color="white", zorder=7)
+
+
+def _draw_plans(ax, situation: PlannerSituation, plans: dict[Behavior, BehaviorPlan]) -> None:
+    """Each behavior's samples (light; dotted where they collide), then its chosen trajectory."""
+    from matplotlib.colors import to_rgb
+    import matplotlib.patheffects as pe
+
+    ego = situation.ego
     for behavior, bp in plans.items():
         tint = 0.45 * np.asarray(to_rgb(BEHAVIOR_COLOURS[behavior])) + 0.55  # lighter than the chosen line
         traj = _to_ego(bp.result.trajectories[:, :, :2], ego)
@@ -244,6 +254,18 @@ def _draw_scene(ax, situation: PlannerSituation, plans: dict[Behavior, BehaviorP
         best = _to_ego(bp.result.trajectory[:, :2], ego)
         ax.plot(best[:, 0], best[:, 1], color=BEHAVIOR_COLOURS[behavior], lw=3.2, zorder=3,
                 solid_capstyle="round", path_effects=[pe.Stroke(linewidth=4.8, foreground="black"), pe.Normal()])
+
+
+def _draw_scene(ax, situation: PlannerSituation, plans: dict[Behavior, BehaviorPlan], planner: PlannerConfig,
+                x_range: tuple[float, float]) -> None:
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Polygon
+
+    ego = situation.ego
+    _draw_road(ax, situation)
+    horizon = float(planner.horizon)
+    _draw_obstacles(ax, situation, horizon)
+    _draw_plans(ax, situation, plans)
     box = box_corners([[ego.x, ego.y]], [ego.yaw], [planner.length], [planner.width])[0]
     ax.add_patch(Polygon(_to_ego(box, ego), closed=True, fc="#1496ff", ec="white", lw=1.2, zorder=8))
     ax.annotate(f"ego {ego.v:.0f} m/s", (0.0, 0.0), xytext=(0, -16), textcoords="offset points", ha="center",
