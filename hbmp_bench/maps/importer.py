@@ -186,37 +186,12 @@ def import_map(path: str | Path, name: str, *, like: str | None = None, sidewalk
     and UserError (a ValueError) for a bad name, an existing map without ``force``, a wrong
     extension or a file that does not convert; nothing is written then.
     """
-    _check_name(name)
-    if like is not None and like not in TOWNS:
-        raise UnknownNameError("town", like, TOWNS)
-    if lights not in LIGHTS:
-        raise UnknownNameError("lights", lights, LIGHTS)
-    src = Path(path).expanduser()
-    if not src.is_file():
-        raise FileNotFoundError(f"map file not found: {src}")
-    lower = src.name.lower()
-    if not (lower.endswith(".xodr") or lower.endswith(NET_SUFFIX)):
-        raise UserError(f"{src.name}: expected an OpenDRIVE .xodr or a SUMO .net.xml file")
-    if name in user_maps() and not force:
-        previous = map_info(name)
-        raise UserError(f"map {name!r} exists (imported from {previous.get('source', '?')} on "
-                        f"{previous.get('imported_at', '?')}); use --force (force=True) to replace it")
+    src, lower = _check_import(path, name, like, lights, force)
     label = src.name
     runs: list[list[str]] = []
     with tempfile.TemporaryDirectory(prefix="hbmp_import_") as tmp:
         tmp_dir = Path(tmp)
-        staged = tmp_dir / "input.net.xml"
-        if lower.endswith(".xodr"):
-            _quick_xml_check(src, "OpenDRIVE", label)
-            shutil.copyfile(src, tmp_dir / "input.xodr")
-            (tmp_dir / "lanetypes.typ.xml").write_text(typemap_xml(), encoding="utf-8")
-            args = ["--opendrive-files", "input.xodr", "--type-files", "lanetypes.typ.xml", *XODR_OPTIONS,
-                    "--output-file", staged.name]
-            _netconvert(args, tmp_dir, label, "OpenDRIVE conversion")
-            runs.append(args)
-        else:
-            _quick_xml_check(src, "net", label)
-            shutil.copyfile(src, staged)
+        staged = _stage(src, tmp_dir, label, runs)
         validate_net(staged, label)
         root = ET.parse(staged).getroot()
         source_tls = _tls_count(root)
@@ -225,33 +200,8 @@ def import_map(path: str | Path, name: str, *, like: str | None = None, sidewalk
         guess_sidewalks = sidewalks and not _has_walkable_edge(root)
         final = staged
         if patches or discarded or guess_sidewalks or guess_lights or lights == "lawful":
-            args = ["--sumo-net-file", staged.name, *NET_OPTIONS]
-            if patches:
-                (tmp_dir / "lanetypes.edg.xml").write_text(patch_xml(patches), encoding="utf-8")
-                args += ["--edge-files", "lanetypes.edg.xml"]
-            if discarded:
-                (tmp_dir / "crossings.con.xml").write_text(discard_xml(discarded), encoding="utf-8")
-                args += ["--connection-files", "crossings.con.xml"]
-            if guess_sidewalks:
-                args += list(SIDEWALK_OPTIONS)
-            if guess_lights:
-                args += ["--tls.guess", "true"]
-            if lights == "lawful":
-                args += list(LAWFUL_LIGHT_OPTIONS)
-            final = tmp_dir / "output.net.xml"
-            args += ["--output-file", final.name]
-            _netconvert(args, tmp_dir, label, "net rebuild")
-            runs.append(args)
-            guessed = continuation_crossings(ET.parse(final).getroot()) if guess_sidewalks else []
-            if guessed:  # crossings the sidewalk guess put at continuation nodes: one more pass drops them
-                (tmp_dir / "guessed.con.xml").write_text(discard_xml(guessed), encoding="utf-8")
-                staged_again = tmp_dir / "guessed.net.xml"
-                final.replace(staged_again)
-                args = ["--sumo-net-file", staged_again.name, *NET_OPTIONS, "--connection-files", "guessed.con.xml",
-                        *(LAWFUL_LIGHT_OPTIONS if lights == "lawful" else ()), "--output-file", final.name]
-                _netconvert(args, tmp_dir, label, "crossing removal")
-                runs.append(args)
-                discarded += guessed
+            final, discarded = _rebuild(staged, tmp_dir, label, runs, patches, discarded, guess_sidewalks,
+                                        guess_lights, lights)
         curves_lowered = limit_curve_speeds(final)
         if lights == "lawful":
             retime_yellows(final)  # after the curve speeds: yellows follow the approach speeds
@@ -282,6 +232,80 @@ def import_map(path: str | Path, name: str, *, like: str | None = None, sidewalk
 
     load_road_network.cache_clear()
     return user_maps_dir() / f"{name}{NET_SUFFIX}"
+
+
+def _check_import(path: str | Path, name: str, like: str | None, lights: str, force: bool) -> tuple[Path, str]:
+    """Refuse an import before anything is written (see :func:`import_map`); (the source file, its lower-case
+    name)."""
+    _check_name(name)
+    if like is not None and like not in TOWNS:
+        raise UnknownNameError("town", like, TOWNS)
+    if lights not in LIGHTS:
+        raise UnknownNameError("lights", lights, LIGHTS)
+    src = Path(path).expanduser()
+    if not src.is_file():
+        raise FileNotFoundError(f"map file not found: {src}")
+    lower = src.name.lower()
+    if not (lower.endswith(".xodr") or lower.endswith(NET_SUFFIX)):
+        raise UserError(f"{src.name}: expected an OpenDRIVE .xodr or a SUMO .net.xml file")
+    if name in user_maps() and not force:
+        previous = map_info(name)
+        raise UserError(f"map {name!r} exists (imported from {previous.get('source', '?')} on "
+                        f"{previous.get('imported_at', '?')}); use --force (force=True) to replace it")
+    return src, lower
+
+
+def _stage(src: Path, tmp_dir: Path, label: str, runs: list[list[str]]) -> Path:
+    """``input.net.xml`` in ``tmp_dir``: the SUMO net as it is, or netconvert's conversion of the OpenDRIVE file
+    (its options appended to ``runs``)."""
+    staged = tmp_dir / "input.net.xml"
+    if src.name.lower().endswith(".xodr"):
+        _quick_xml_check(src, "OpenDRIVE", label)
+        shutil.copyfile(src, tmp_dir / "input.xodr")
+        (tmp_dir / "lanetypes.typ.xml").write_text(typemap_xml(), encoding="utf-8")
+        args = ["--opendrive-files", "input.xodr", "--type-files", "lanetypes.typ.xml", *XODR_OPTIONS,
+                "--output-file", staged.name]
+        _netconvert(args, tmp_dir, label, "OpenDRIVE conversion")
+        runs.append(args)
+    else:
+        _quick_xml_check(src, "net", label)
+        shutil.copyfile(src, staged)
+    return staged
+
+
+def _rebuild(staged: Path, tmp_dir: Path, label: str, runs: list[list[str]], patches, discarded: list,
+             guess_sidewalks: bool, guess_lights: bool, lights: str) -> tuple[Path, list]:
+    """(``output.net.xml``, the crossings discarded): the staged net rebuilt by netconvert with the lane patches,
+    the ``discarded`` crossings (and those the sidewalk guess put at continuation nodes, dropped by one more pass),
+    guessed sidewalks and lights and the lawful light timing asked for; each pass's options appended to ``runs``."""
+    args = ["--sumo-net-file", staged.name, *NET_OPTIONS]
+    if patches:
+        (tmp_dir / "lanetypes.edg.xml").write_text(patch_xml(patches), encoding="utf-8")
+        args += ["--edge-files", "lanetypes.edg.xml"]
+    if discarded:
+        (tmp_dir / "crossings.con.xml").write_text(discard_xml(discarded), encoding="utf-8")
+        args += ["--connection-files", "crossings.con.xml"]
+    if guess_sidewalks:
+        args += list(SIDEWALK_OPTIONS)
+    if guess_lights:
+        args += ["--tls.guess", "true"]
+    if lights == "lawful":
+        args += list(LAWFUL_LIGHT_OPTIONS)
+    final = tmp_dir / "output.net.xml"
+    args += ["--output-file", final.name]
+    _netconvert(args, tmp_dir, label, "net rebuild")
+    runs.append(args)
+    guessed = continuation_crossings(ET.parse(final).getroot()) if guess_sidewalks else []
+    if guessed:  # crossings the sidewalk guess put at continuation nodes: one more pass drops them
+        (tmp_dir / "guessed.con.xml").write_text(discard_xml(guessed), encoding="utf-8")
+        staged_again = tmp_dir / "guessed.net.xml"
+        final.replace(staged_again)
+        args = ["--sumo-net-file", staged_again.name, *NET_OPTIONS, "--connection-files", "guessed.con.xml",
+                *(LAWFUL_LIGHT_OPTIONS if lights == "lawful" else ()), "--output-file", final.name]
+        _netconvert(args, tmp_dir, label, "crossing removal")
+        runs.append(args)
+        discarded = discarded + guessed
+    return final, discarded
 
 
 _HEADER = re.compile(rb"<!-- generated on .*?-->\n", re.S)
