@@ -89,10 +89,6 @@ def circles(graph: dict[str, set[str]]) -> list[list[str]]:
     return found
 
 
-ENVS_CIRCLE = ["hbmp_bench.envs.observation", "hbmp_bench.envs.occupancy_kernel"]
-"""The one circle left to the env front door's rework (issue 42, step 1)."""
-
-
 def test_the_import_graph_sees_function_level_imports():
     graph = import_graph()
     assert "hbmp_bench.agents.learned" in graph["hbmp_bench.agents.loading"]  # load_agent imports it in its body
@@ -100,13 +96,8 @@ def test_the_import_graph_sees_function_level_imports():
 
 
 def test_no_import_circles():
-    found = [c for c in circles(import_graph()) if c != ENVS_CIRCLE]
+    found = circles(import_graph())
     assert found == [], "import circles: " + "; ".join(" <-> ".join(c) for c in found)
-
-
-def test_no_envs_import_circle():
-    if ENVS_CIRCLE in circles(import_graph()):
-        pytest.xfail(f"{' <-> '.join(ENVS_CIRCLE)}: left to the env front door's rework")
 
 
 @pytest.mark.parametrize("low, high", [
