@@ -78,7 +78,7 @@ def _remaining_m(net: RoadNetwork, episode: Episode) -> float:
 # ------------------------------------------------------------------ HardBrake
 class HardBrake(Script):
     """A leader 30 m ahead on the ego's lane and route drives off with SUMO's driver at 70 % of the
-    speed limit; once it is faster than 6 m/s and the ego within 25 m behind it (or it has driven
+    speed limit; once it is faster than 6 m/s and the ego within 18 m behind it (or it has driven
     120 m), it brakes to a stop at 8 m/s², stands 3 s and drives on."""
 
     LEADER = "sc_leader"
@@ -106,7 +106,7 @@ class HardBrake(Script):
         if self.phase == "follow":
             gap = float(np.hypot(*(leader.xy - ego.xy))) - SCENARIO_LENGTH_M
             driven = float(np.hypot(*(leader.xy - self.start_xy)))
-            if leader.speed >= 6.0 and (gap <= 25.0 or driven >= 120.0):
+            if leader.speed >= 6.0 and (gap <= 18.0 or driven >= 120.0):
                 sim.hand_over(self.LEADER)
                 sim.set_speed(self.LEADER, 0.0)
                 self.phase = "braking"
@@ -123,14 +123,14 @@ class HardBrake(Script):
 # ------------------------------------------------------------------ CutIn
 class CutIn(Script):
     """Once the ego is faster than 6 m/s on its start edge, a car appears beside it in the next lane,
-    overtakes 3-4 m/s faster and changes into the ego's lane ``gap_m`` (4-8 m) ahead of its front bumper,
-    then slows to the ego's speed and drives on with SUMO's driver."""
+    overtakes 3-4 m/s faster and changes into the ego's lane ``gap_m`` (2.5-5 m) ahead of its front bumper,
+    then brakes for 2 s to 3 m/s below the ego's speed and drives on with SUMO's driver."""
 
     CUTTER = "sc_cutter"
 
     def __init__(self, episode, net, rng):
         super().__init__(episode, net, rng)
-        self.gap_m = float(rng.uniform(4.0, 8.0))
+        self.gap_m = float(rng.uniform(2.5, 5.0))
         self.extra_mps = float(rng.uniform(3.0, 4.0))
         self.side = _cut_in_side(net, episode)
         self.phase, self.cut_at = "wait", math.inf
@@ -173,6 +173,7 @@ class CutIn(Script):
             rear_gap = cutter.lane_pos - SCENARIO_LENGTH_M - ego.lane_pos
             if rear_gap >= self.gap_m:
                 sim.change_lane(self.CUTTER, net.lane(ego.lane).index)
+                sim.set_speed(self.CUTTER, max(ego.speed - 3.0, 0.0))
                 self.phase, self.cut_at = "cut", sim.time
                 self.log(sim, f"cuts in {rear_gap:.1f} m ahead at {cutter.speed:.1f} m/s (ego {ego.speed:.1f} m/s)")
         elif self.phase == "cut" and sim.time >= self.cut_at + 2.0:
@@ -320,19 +321,20 @@ def _to_junction_m(net: RoadNetwork, episode: Episode, hazard: JunctionHazard, e
 
 class CrossTraffic(Script):
     """A stream of ``count`` cars on a foe link of a junction of the route (``hazard_kind``, see
-    :func:`junction_hazard`), one every ``headway_s`` from when the ego is 100 m from the junction, each
-    inserted 50 m before its stop line at 80 % of its lane's limit and driven by SUMO (which keeps its
-    lights and right of way). Subclasses name the hazard and draw the stream."""
+    :func:`junction_hazard`) from when the ego is 100 m from the junction, each after its own headway
+    (drawn in ``headway_range``: gaps a driver must judge), inserted 50 m before its stop line at 80 % of its
+    lane's limit and driven by SUMO (which keeps its lights and right of way). Subclasses name the hazard
+    and draw the stream."""
 
     hazard_kind = ""
-    count_range = (4, 7)
-    headway_range = (2.5, 4.0)
+    count_range = (6, 10)
+    headway_range = (1.5, 4.0)
 
     def __init__(self, episode, net, rng):
         super().__init__(episode, net, rng)
         self.hazard = junction_hazard(net, episode, self.hazard_kind)
         self.count = int(rng.integers(self.count_range[0], self.count_range[1] + 1))
-        self.headway_s = float(rng.uniform(*self.headway_range))
+        self.headways_s = rng.uniform(*self.headway_range, size=self.count)
         self.sent, self.next_at = 0, math.inf
 
     def tick(self, sim, ego):
@@ -345,7 +347,8 @@ class CrossTraffic(Script):
             if _to_junction_m(net, self.episode, self.hazard, ego) > 100.0:
                 return
             self.next_at = sim.time
-            self.log(sim, f"stream of {self.count} on {foe.from_lane}, one every {self.headway_s:.1f} s")
+            self.log(sim, f"stream of {self.count} on {foe.from_lane}, headways "
+                          f"{', '.join(f'{h:.1f}' for h in self.headways_s)} s")
         if sim.time + 1e-9 < self.next_at:
             return
         lane = net.lane(foe.from_lane)
@@ -354,7 +357,7 @@ class CrossTraffic(Script):
                         pos=max(lane.length - 50.0, 1.0), speed=0.8 * lane.speed, vtype=SCENARIO_TYPE)
         sim.set_speed(name, 0.8 * lane.speed)
         self.sent += 1
-        self.next_at = sim.time + self.headway_s
+        self.next_at = sim.time + float(self.headways_s[self.sent - 1])
         self.log(sim, f"{name} inserted")
 
 
@@ -374,12 +377,12 @@ def _onwards(net: RoadNetwork, edge: str, min_m: float = 150.0) -> tuple[str, ..
 class RedLightRunner(Script):
     """At a light where the ego goes straight, once its light is green and the ego, at its speed, would reach
     where a perpendicular approach's straight link crosses its own as soon as a car from 70 m before that
-    approach's (red) stop line at 1.4 times its lane's limit, such a car comes: it ignores its red and the
+    approach's (red) stop line at 1.3 times its lane's limit, such a car comes: it ignores its red and the
     right of way (SUMO keeps its car following) and is given back to SUMO's driver past the junction. A
     lawful driver sees it come, well over its limit, at its red (the privileged scene's ``foe_speeding``)."""
 
     RUNNER = "sc_runner"
-    SPEED_FACTOR = 1.4
+    SPEED_FACTOR = 1.3
     FROM_M = 70.0
 
     def __init__(self, episode, net, rng):
@@ -426,24 +429,24 @@ class RedLightRunner(Script):
 
 
 class UnprotectedLeft(CrossTraffic):
-    """The ego turns left at a light while 4-7 oncoming cars go straight through on their green, one
-    every 2.5-4 s: it must wait for a gap."""
+    """The ego turns left at a light while 6-10 oncoming cars go straight through on their green, 1.5-4 s
+    apart: it must wait for a gap."""
 
     hazard_kind = "unprotected_left"
 
 
 class Merge(CrossTraffic):
-    """The ego's road merges, without a light, into a road on which 6-9 cars arrive one every 2-3 s:
-    it must find its gap (a motorway on-ramp where the town has one)."""
+    """The ego's road merges, without a light, into a road on which 8-12 cars arrive 1.5-3 s apart: it
+    must find its gap (a motorway on-ramp where the town has one)."""
 
     hazard_kind = "merge"
-    count_range = (6, 9)
-    headway_range = (2.0, 3.0)
+    count_range = (8, 12)
+    headway_range = (1.5, 3.0)
 
 
 class GiveWay(CrossTraffic):
-    """The ego's road yields at an unsignalised junction to a priority road on which 4-7 cars cross,
-    one every 2.5-4 s: it must give way."""
+    """The ego's road yields at an unsignalised junction to a priority road on which 6-10 cars cross,
+    1.5-4 s apart: it must give way."""
 
     hazard_kind = "give_way"
 
@@ -503,7 +506,7 @@ register_scenario_type(ScenarioType(
 register_scenario_type(ScenarioType(
     "CutIn", "Merging", "Straight",
     lambda net, ep: _remaining_m(net, ep) >= 100.0 and _cut_in_side(net, ep) != 0,
-    CutIn, "A faster car overtakes in the next lane and cuts in 4-8 m ahead."))
+    CutIn, "A faster car overtakes in the next lane, cuts in 2.5-5 m ahead and brakes."))
 register_scenario_type(ScenarioType(
     "PedestrianStepsOut", "Pedestrians", "Straight",
     lambda net, ep: _remaining_m(net, ep) >= PedestrianStepsOut.AHEAD_M + 20.0 and bool(net.walkable_edges),

@@ -112,9 +112,17 @@ class Suite:
         those whose episodes it leaves as they were (and whose results stay valid)."""
         defaults = {f.name: f.default for f in dataclass_fields(self)}
         fields = {k: v for k, v in asdict(self).items() if k not in FIELDS_SINCE_RULES_11 or v != defaults[k]}
+        if any(t not in TASKS for t in self.tasks):  # scenario types: their scripts are part of the episodes
+            fields["scenario_rules"] = SCENARIO_RULES_VERSION
         blob = json.dumps({**fields, "episode_rules": EPISODE_RULES_VERSION}, sort_keys=True, default=list).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
 
+
+SCENARIO_RULES_VERSION = 2
+"""Version of the scenario types' scripts (``scenarios.scenario_types``: when and how their actors act), part
+of the definition hash of a suite that holds scenario types, so that results of other scripts never mix. Bump
+it whenever a script changes. 2: streams of 6-12 cars at headways drawn per car (1.5-4 s: gaps to judge), a
+cut-in 2.5-5 m ahead that then brakes, a runner at 1.3 times its limit, a leader that brakes within 18 m."""
 
 FIELDS_SINCE_RULES_11 = ("timeout_waits_at_lights",)
 """Suite fields added after episode rules 11: at their default they leave the definition hash as it was."""
