@@ -288,24 +288,35 @@ def junction_hazard(net: RoadNetwork, episode: Episode, kind: str) -> JunctionHa
             return None
         links = net.links(a, b)
         if ahead >= 40.0 and links:
-            link = links[0]
-            for c in net.link_conflicts(link):
-                foe = c.foe
-                if c.at_m <= 0.0 or net.edge_length[foe.from_edge] < 60.0:
-                    continue
-                angle = _opposite_heading(net, a, foe.from_edge)
-                if kind == "unprotected_left" and link.direction == "l" and link.tls and foe.direction == "s" \
-                        and angle > math.radians(150):
-                    return JunctionHazard(k, link, c, ahead)
-                merge = foe.to_edge == link.to_edge
-                if kind in ("give_way", "merge") and not link.tls and link.state == "m" and foe.state == "M" \
-                        and merge == (kind == "merge"):
-                    return JunctionHazard(k, link, c, ahead)
-                if kind == "red_light" and link.direction == "s" and link.tls and foe.tls and foe.direction in "sl" \
-                        and math.radians(60) < angle < math.radians(120):
-                    return JunctionHazard(k, link, c, ahead)
+            for c in net.link_conflicts(links[0]):
+                if c.at_m > 0.0 and net.edge_length[c.foe.from_edge] >= 60.0 and \
+                        _HAZARD_TESTS[kind](links[0], c.foe, _opposite_heading(net, a, c.foe.from_edge)):
+                    return JunctionHazard(k, links[0], c, ahead)
         ahead += net.junction_length(a, b) + net.edge_length[b]
     return None
+
+
+def _unprotected_left(link, foe, angle: float) -> bool:
+    return link.direction == "l" and bool(link.tls) and foe.direction == "s" and angle > math.radians(150)
+
+
+def _yields(link, foe, merge: bool) -> bool:
+    return not link.tls and link.state == "m" and foe.state == "M" and (foe.to_edge == link.to_edge) == merge
+
+
+def _red_light(link, foe, angle: float) -> bool:
+    return link.direction == "s" and bool(link.tls and foe.tls) and foe.direction in "sl" \
+        and math.radians(60) < angle < math.radians(120)
+
+
+_HAZARD_TESTS = {
+    "unprotected_left": _unprotected_left,
+    "give_way": lambda link, foe, angle: _yields(link, foe, merge=False),
+    "merge": lambda link, foe, angle: _yields(link, foe, merge=True),
+    "red_light": _red_light,
+}
+"""Whether the ego's link and a foe link crossing it (with the angle [rad] between their approaches) make
+a junction hazard of each kind (:func:`junction_hazard`)."""
 
 
 def _to_junction_m(net: RoadNetwork, episode: Episode, hazard: JunctionHazard, ego: VehicleState) -> float:
