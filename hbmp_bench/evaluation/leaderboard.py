@@ -230,6 +230,14 @@ def _mean_driving_score_lb2(doc: dict) -> float:
     return sum(scores_) / len(scores_) if scores_ else 0.0
 
 
+def _held_sentence(spec) -> str:
+    """How many episodes the suite holds where that is fewer than towns × tasks × episodes ("" otherwise)."""
+    held = _suite_episodes(spec.name)
+    if held == len(spec.towns) * len(spec.tasks) * spec.episodes_per_task:
+        return ""
+    return f" at most: {held} in all (a scenario type has no episode in a town that cannot host it, fewer where it is rare)"
+
+
 def _lb2_sentence(tasks: Sequence[str]) -> str:
     from hbmp_bench.metrics.records import DRIVING_SCORE_LB2_DEFINITION
 
@@ -262,7 +270,7 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
         f"# Leaderboard: {spec.name}\n",
         f"{spec.description}\n",
         f"Suite definition hash `{spec.definition_hash()}`: {len(spec.towns)} towns × {len(spec.tasks)} tasks × "
-        f"{spec.episodes_per_task} episodes. Generated from the `*.json` results files by "
+        f"{spec.episodes_per_task} episodes{_held_sentence(spec)}. Generated from the `*.json` results files by "
         f"`hbmp-bench leaderboard render --suite {spec.name}`; do not edit by hand. Complete entries are ranked by "
         f"success % (episodes that reached the goal), then driving score: the mean over episodes of the "
         f"{DRIVING_SCORE_DEFINITION}{_lb2_sentence(spec.tasks)}. km / infraction: km driven per infraction event (collisions, wrong lane, "
