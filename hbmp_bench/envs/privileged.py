@@ -226,13 +226,7 @@ class PrivilegedScene:
         lane = self.net.lane(followed_lane)
         nxt = next_edges[0] if next_edges else None
         links = [c for c in self.net.connections[lane.edge] if c.from_lane == followed_lane and c.to_edge == nxt]
-        link = links[0] if links else None
-        if len(links) > 1 and self.lane_path is not None:
-            step = self.net.follow(followed_lane, nxt, into[0] if into else frozenset())
-            link = next((c for c in links if (c.via or c.to_lane) == step), link)
-        if len(links) > 1 and self.lane_path is None:
-            on = ego.lane if ego.lane in self.net.internal_lanes else self.sim.next_junction_lane(self.vehicle_id)
-            link = next((c for c in links if c.via == on or on in self.net.link_lanes(c)), link)
+        link = self._driven_link(ego, followed_lane, nxt, links, into) if len(links) > 1 else (links[0] if links else None)
         if link is None or len(self.net.link_shape(link)) < 2:
             return None, float("nan")
         ends, direction = stop_line_of(lane.shape, lane.width)
@@ -241,6 +235,16 @@ class PrivilegedScene:
         if entry <= 0.0:
             entry = -project_on_polyline(self.net.link_shape(link), front)[0]
         return link, entry
+
+    def _driven_link(self, ego: VehicleState, followed_lane: str, nxt: str | None, links: list[Connection],
+                     into: tuple[frozenset[str], ...]) -> Connection:
+        """Of several ``links`` from the followed lane onto ``nxt``, the one the vehicle drives (see
+        :meth:`_link_ahead`); the first where none matches."""
+        if self.lane_path is not None:
+            step = self.net.follow(followed_lane, nxt, into[0] if into else frozenset())
+            return next((c for c in links if (c.via or c.to_lane) == step), links[0])
+        on = ego.lane if ego.lane in self.net.internal_lanes else self.sim.next_junction_lane(self.vehicle_id)
+        return next((c for c in links if c.via == on or on in self.net.link_lanes(c)), links[0])
 
     def _junction_foes(self, link: Connection, entry: float) -> tuple[dict, ...]:
         conflicts = self.net.link_conflicts(link)

@@ -534,8 +534,16 @@ class GoalRoute:
                 out = sorted([*out, light], key=lambda a: a.distance)
         if k is None or nxt is None or (first_only and out):
             return out
+        return out + self._lights_beyond(k, at, lane, nxt, first_only)
+
+    def _lights_beyond(self, k: int, at: float, lane: str, nxt: str, first_only: bool) -> list[LightAhead]:
+        """The lights of the links the route takes beyond the followed lane's (``k``: its route edge,
+        ``at`` [m]: the position along the route), up to ``LIGHTS_RANGE_M``; the nearest alone with
+        ``first_only``."""
+        net, sim = self.v.shared.net, self.v.shared.sim
         own = next((c for c in net.connections[net.lane(lane).edge] if c.from_lane == lane and c.to_edge == nxt), None)
         to_lane = (own or net.route_link(self.edges[k], nxt, lane)).to_lane
+        out = []
         for j in range(k + 1, len(self.edges) - 1):
             distance = float(self.path.edge_end[j]) - at
             if distance > LIGHTS_RANGE_M:
