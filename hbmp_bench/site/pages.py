@@ -31,6 +31,9 @@ PAPER_TOWN15_PCT = 85.0
 FAILURES_PER_ENTRY = 5
 """Failed episodes listed per entry on an agent's page (the first in town, task, episode order)."""
 
+PAPER_AGENTS = ("hbmp", "il", "hbmp-s", "expert")
+"""The agents whose pairs the paper page's paired table shows."""
+
 
 def esc(value) -> str:
     return html.escape(str(value), quote=True)
@@ -196,132 +199,200 @@ def infractions_per_100km(doc: dict) -> float:
     return 100.0 * events / km if km > 0 else 0.0
 
 
-def board_page(data: BoardData, boards: Sequence[BoardData], agents: Sequence[str]) -> str:
-    labels = _task_labels()
-    entries = data.entries
+def _yes_no(flag) -> str:
+    """"yes" or "no", as the tables write a flag."""
+    return "yes" if flag else "no"
+
+
+def _agent_link(agent: str) -> Cell:
+    """A text cell naming an agent, linked to its page."""
+    return txt(agent, "agent", f'<a href="{agent_file(agent)}">{esc(agent)}</a>')
+
+
+def _file_link(data: BoardData, name: str) -> Cell:
+    """A text cell naming a board's results file, linked to its copy in the site."""
+    return txt(name, None, f'<a href="{raw_path(data, name)}">{esc(name)}</a>')
+
+
+def _p_cell(r) -> Cell:
+    """The cell of a paired comparison's McNemar p (three significant digits; sorts by the value)."""
+    return Cell(esc(f"{float(r['p_mcnemar']):.3g}"), sort=repr(float(r["p_mcnemar"])), field="p_mcnemar")
+
+
+def _board_selects(entries: Sequence[dict], labels: dict[str, str],
+                   tasks: Sequence[str]) -> dict[str, list[tuple[str, str]]]:
+    """The options of a board's filter forms: its entries' fidelities, privileged, towns and tasks."""
     fidelities = sorted({d["fidelity"] for d in entries})
     towns = sorted({t for d in entries for t in _entry_towns(d)})
-    tasks = [t for t in labels if any(t in _entry_tasks(d) for d in entries)]
-    selects = {"fidelity": [(f, f) for f in fidelities], "privileged": [("yes", "yes"), ("no", "no")],
-               "town": [(t, t) for t in towns], "task": [(t, labels[t]) for t in tasks]}
-    parts = [f"<h1>Leaderboard: {esc(data.board.title)}</h1>\n", f"<p>{inline(data.description)}</p>\n"]
+    return {"fidelity": [(f, f) for f in fidelities], "privileged": [("yes", "yes"), ("no", "no")],
+            "town": [(t, t) for t in towns], "task": [(t, labels[t]) for t in tasks]}
+
+
+def _board_intro(data: BoardData) -> list[str]:
+    """HTML of a board page's title, description and note (entries, complete ones, suite hash)."""
+    entries = data.entries
     readme = (f' The board\'s own table: <a href="{raw_path(data, "README.md")}">README.md</a>.'
               if data.readme else "")
-    parts.append(f'<p class="note">{len(entries)} entries, {sum(d["complete"] for d in entries)} complete '
-                 f'(every episode of the suite: ranked in <code>leaderboards/</code>); partial runs cover '
-                 f'part of the suite and compare only on their own episodes. Suite definition hash '
-                 f'<code>{esc(entries[0]["suite_hash"])}</code>. Click a column to sort; the forms filter '
-                 f'rows.{readme}</p>\n')
+    return [f"<h1>Leaderboard: {esc(data.board.title)}</h1>\n", f"<p>{inline(data.description)}</p>\n",
+            f'<p class="note">{len(entries)} entries, {sum(d["complete"] for d in entries)} complete '
+            f'(every episode of the suite: ranked in <code>leaderboards/</code>); partial runs cover '
+            f'part of the suite and compare only on their own episodes. Suite definition hash '
+            f'<code>{esc(entries[0]["suite_hash"])}</code>. Click a column to sort; the forms filter '
+            f'rows.{readme}</p>\n']
 
+
+def _entry_row(data: BoardData, doc: dict, tasks: Sequence[str]) -> tuple[list[Cell], dict[str, str]]:
+    """The row of one entry in a board's entries table: its summary, per-task success and provenance."""
+    s, prov, by_task = doc["summary"], doc["provenance"], doc["aggregates"].get("success_pct_by_task", {})
+    return ([
+        _agent_link(doc["agent"]),
+        txt(doc["fidelity"], "fidelity"), txt(_yes_no(doc["privileged"]), "privileged"),
+        txt(_yes_no(doc["complete"]), "complete"),
+        num(s.get("success_pct"), "summary.success_pct"),
+        *(num(by_task.get(t), f"aggregates.success_pct_by_task.{t}") for t in tasks),
+        num(s.get("mean_driving_score"), "summary.mean_driving_score"),
+        num(100.0 * s.get("mean_route_completion", 0.0), "summary.mean_route_completion"),
+        num(infractions_per_100km(doc), "infractions_per_100km", digits=2),
+        num(s.get("km_per_infraction"), "summary.km_per_infraction", digits=2),
+        num(s.get("collisions"), "summary.collisions"), num(s.get("red_light"), "summary.red_light"),
+        num(s.get("timeouts"), "summary.timeouts"), num(s.get("episodes"), "summary.episodes"),
+        txt(" ".join(_entry_towns(doc))), txt((prov.get("git_commit") or "")[:10], "provenance.git_commit"),
+        txt((prov.get("date_utc") or "")[:10]),
+        num(prov.get("wall_time_s"), "provenance.wall_time_s", digits=0),
+        _file_link(data, doc["_file"]),
+    ], _entry_attrs(doc))
+
+
+def _entries_section(data: BoardData, labels: dict[str, str], tasks: Sequence[str],
+                     selects: dict[str, list[tuple[str, str]]]) -> list[str]:
+    """HTML of a board page's entries table, its filter form and the note on its columns."""
     head = ["agent", "fidelity", "privileged", "complete", "success %",
             *(labels[t] + " %" for t in tasks), "driving score", "route completion %", "infractions / 100 km",
             "km / infraction", "collisions", "red lights", "timeouts", "episodes", "towns", "commit", "date",
             "wall s", "results file"]
-    rows = []
-    for doc in entries:
-        s, prov, by_task = doc["summary"], doc["provenance"], doc["aggregates"].get("success_pct_by_task", {})
-        rows.append(([
-            txt(doc["agent"], "agent", f'<a href="{agent_file(doc["agent"])}">{esc(doc["agent"])}</a>'),
-            txt(doc["fidelity"], "fidelity"), txt("yes" if doc["privileged"] else "no", "privileged"),
-            txt("yes" if doc["complete"] else "no", "complete"),
-            num(s.get("success_pct"), "summary.success_pct"),
-            *(num(by_task.get(t), f"aggregates.success_pct_by_task.{t}") for t in tasks),
-            num(s.get("mean_driving_score"), "summary.mean_driving_score"),
-            num(100.0 * s.get("mean_route_completion", 0.0), "summary.mean_route_completion"),
-            num(infractions_per_100km(doc), "infractions_per_100km", digits=2),
-            num(s.get("km_per_infraction"), "summary.km_per_infraction", digits=2),
-            num(s.get("collisions"), "summary.collisions"), num(s.get("red_light"), "summary.red_light"),
-            num(s.get("timeouts"), "summary.timeouts"), num(s.get("episodes"), "summary.episodes"),
-            txt(" ".join(_entry_towns(doc))), txt((prov.get("git_commit") or "")[:10], "provenance.git_commit"),
-            txt((prov.get("date_utc") or "")[:10]),
-            num(prov.get("wall_time_s"), "provenance.wall_time_s", digits=0),
-            txt(doc["_file"], None, f'<a href="{raw_path(data, doc["_file"])}">{esc(doc["_file"])}</a>'),
-        ], _entry_attrs(doc)))
-    parts += ["<h2 id=\"entries-title\">Entries</h2>\n", filters("entries", selects), table("entries", head, rows)]
-    parts.append('<p class="note">success %: episodes that reached the goal; driving score: CARLA Leaderboard '
-                 '(route completion × infraction penalty), mean over episodes; infractions: collision, wrong-lane, '
-                 'off-road and red-light events (an episode can have several).</p>\n')
+    rows = [_entry_row(data, doc, tasks) for doc in data.entries]
+    return ["<h2 id=\"entries-title\">Entries</h2>\n", filters("entries", selects), table("entries", head, rows),
+            '<p class="note">success %: episodes that reached the goal; driving score: CARLA Leaderboard '
+            '(route completion × infraction penalty), mean over episodes; infractions: collision, wrong-lane, '
+            'off-road and red-light events (an episode can have several).</p>\n']
 
-    parts += ["<h2>Per town and task</h2>\n",
-              '<p class="note">Each entry\'s episodes per town × task: episodes with each outcome (from '
-              '<code>hbmp-bench report</code>\'s outcome counts), km driven and infraction events per km.</p>\n',
-              filters("breakdown", selects)]
-    by_file = {d["_file"]: d for d in entries}
-    rows = []
-    for r in data.breakdown.to_dict(orient="records"):
-        doc = by_file[r["source"]]
-        attrs = {**_entry_attrs(doc), "town": r["town"], "task": r["task"]}
-        rows.append(([
-            txt(doc["agent"], "agent", f'<a href="{agent_file(doc["agent"])}">{esc(doc["agent"])}</a>'),
-            txt(doc["fidelity"]), txt("yes" if doc["privileged"] else "no"), txt(r["town"], "town"),
-            txt(labels[r["task"]], "task"), num(int(r["episodes"]), "episodes"), num(r["success_pct"], "success_pct"),
-            *(num(int(r[k]), k) for k in ("collision", "red_light", "timeout", "wrong_lane", "left_network",
-                                           "agent_error")),
-            num(r["km_driven"], "km_driven", digits=2), num(int(r["infraction_events"]), "infraction_events"),
-            num(r["infractions_per_km"], "infractions_per_km", digits=3),
-        ], attrs))
-    parts.append(table("breakdown", ["agent", "fidelity", "privileged", "town", "task", "episodes", "success %",
-                                     "collision", "red light", "timeout", "wrong lane / off-road", "left network",
-                                     "agent error", "km driven", "infraction events", "infractions / km"], rows))
 
-    parts += ["<h2>Paired comparisons</h2>\n",
-              '<p class="note">Every pair of entries on the episodes both scored (the <code>paired</code> view of '
-              '<code>hbmp-bench report</code>): episodes only one of them finished and the exact two-sided '
-              'McNemar p on those. A small p: the gap is more than the luck of these episodes (it says nothing of '
-              'training seeds).</p>\n', filters("paired", {}, text=True)]
-    rows = []
-    for (first, second), r in data.paired.iterrows() if not data.paired.empty else ():
-        rows.append(([txt(first, "first"), txt(second, "second"), num(int(r["episodes"]), "episodes"),
-                      num(int(r["both_success"]), "both_success"), num(int(r["only_first"]), "only_first"),
-                      num(int(r["only_second"]), "only_second"), num(int(r["neither"]), "neither"),
-                      num(float(r["diff_pp"]), "diff_pp"), Cell(esc(f"{float(r['p_mcnemar']):.3g}"),
-                                                                sort=repr(float(r["p_mcnemar"])), field="p_mcnemar")],
-                     {}))
-    parts.append(table("paired", ["first", "second", "episodes", "both reached the goal", "only first",
-                                  "only second", "neither", "difference (pp)", "p (McNemar)"], rows))
+def _breakdown_row(doc: dict, r: dict, labels: dict[str, str]) -> tuple[list[Cell], dict[str, str]]:
+    """The row of one entry's town × task in a board's breakdown table."""
+    attrs = {**_entry_attrs(doc), "town": r["town"], "task": r["task"]}
+    return ([
+        _agent_link(doc["agent"]),
+        txt(doc["fidelity"]), txt(_yes_no(doc["privileged"])), txt(r["town"], "town"),
+        txt(labels[r["task"]], "task"), num(int(r["episodes"]), "episodes"), num(r["success_pct"], "success_pct"),
+        *(num(int(r[k]), k) for k in ("collision", "red_light", "timeout", "wrong_lane", "left_network",
+                                       "agent_error")),
+        num(r["km_driven"], "km_driven", digits=2), num(int(r["infraction_events"]), "infraction_events"),
+        num(r["infractions_per_km"], "infractions_per_km", digits=3),
+    ], attrs)
 
-    parts += ["<h2>km between infractions</h2>\n",
-              '<p class="note">km driven per infraction event of each kind (the <code>km_between</code> view of '
-              '<code>hbmp-bench report</code>); "no event": none of that kind.</p>\n']
-    rows = []
-    for label, r in data.km_between.iterrows():
-        rows.append(([txt(label, "result_set"), *(num(float(r[k]), k, digits=2) for k in data.km_between.columns)],
-                     {}))
-    parts.append(table("km-between", ["entry", *(c.replace("_", " ") for c in data.km_between.columns)], rows))
 
-    parts += ["<h2>Provenance</h2>\n",
-              '<p class="note">What made each entry: the fingerprints of the package\'s code and of the agent\'s '
-              'weights as they ran, the commit, the machine and the wall time (with its workers).</p>\n']
-    rows = []
-    for doc in entries:
-        prov = doc["provenance"]
-        machine = prov.get("machine") or {}
-        rows.append(([
-            txt(data.labels[doc["_file"]], "label"), txt(prov.get("code_fingerprint") or "", "provenance.code_fingerprint"),
-            txt(prov.get("agent_fingerprint") or "–", "provenance.agent_fingerprint"),
-            txt(prov.get("git_commit") or "", "provenance.git_commit"), txt(prov.get("package_version") or ""),
-            txt(machine.get("cpu") or "", "provenance.machine.cpu"),
-            num(machine.get("cpu_count"), "provenance.machine.cpu_count"),
-            txt(machine.get("python") or ""), txt(machine.get("platform") or "", "provenance.machine.platform"),
-            txt(prov.get("date_utc") or ""), num(prov.get("wall_time_s"), "provenance.wall_time_s", digits=1),
-            num(prov.get("workers"), "provenance.workers"), txt(prov.get("backend") or ""),
-            txt(((prov.get("salt_commitment") or "")[:10]) if doc.get("salted") else "no"),
-            txt(doc["_file"], None, f'<a href="{raw_path(data, doc["_file"])}">{esc(doc["_file"])}</a>'),
-        ], _entry_attrs(doc)))
-    parts.append(table("provenance", ["entry", "code fingerprint", "weights fingerprint", "commit", "version", "CPU",
-                                      "cores", "Python", "platform", "date (UTC)", "wall s", "workers", "backend",
-                                      "salted", "results file"], rows))
+def _breakdown_section(data: BoardData, labels: dict[str, str],
+                       selects: dict[str, list[tuple[str, str]]]) -> list[str]:
+    """HTML of a board page's per town and task table, with its note and filter form."""
+    by_file = {d["_file"]: d for d in data.entries}
+    rows = [_breakdown_row(by_file[r["source"]], r, labels) for r in data.breakdown.to_dict(orient="records")]
+    return ["<h2>Per town and task</h2>\n",
+            '<p class="note">Each entry\'s episodes per town × task: episodes with each outcome (from '
+            '<code>hbmp-bench report</code>\'s outcome counts), km driven and infraction events per km.</p>\n',
+            filters("breakdown", selects),
+            table("breakdown", ["agent", "fidelity", "privileged", "town", "task", "episodes", "success %",
+                                "collision", "red light", "timeout", "wrong lane / off-road", "left network",
+                                "agent error", "km driven", "infraction events", "infractions / km"], rows)]
 
-    parts.append("<h2>Success per task and town, each entry</h2>\n")
-    for doc in entries:
-        matrix = doc["aggregates"].get("success", [])
-        columns = [k for k in (matrix[0] if matrix else {}) if k != "task"]
-        rows = [([txt(row["task"], "task"), *(num(row.get(c), f"success.{c}") for c in columns)], {})
-                for row in matrix]
-        parts.append(f'<details id="matrix-{esc(slug(doc["_file"]))}"><summary>{esc(data.labels[doc["_file"]])} '
-                     f'({esc(doc["fidelity"])}, {esc(doc["_file"])})</summary>\n'
-                     + table(f"matrix-table-{slug(doc['_file'])}", ["task", *columns], rows, sortable=False)
-                     + "</details>\n")
+
+def _paired_row(first: str, second: str, r) -> tuple[list[Cell], dict[str, str]]:
+    """The row of one pair of entries in a board's paired comparisons table."""
+    return ([txt(first, "first"), txt(second, "second"), num(int(r["episodes"]), "episodes"),
+             num(int(r["both_success"]), "both_success"), num(int(r["only_first"]), "only_first"),
+             num(int(r["only_second"]), "only_second"), num(int(r["neither"]), "neither"),
+             num(float(r["diff_pp"]), "diff_pp"), _p_cell(r)], {})
+
+
+def _paired_section(data: BoardData) -> list[str]:
+    """HTML of a board page's paired comparisons: its note, filter form and table (empty where no pairs)."""
+    rows = [_paired_row(first, second, r)
+            for (first, second), r in (data.paired.iterrows() if not data.paired.empty else ())]
+    return ["<h2>Paired comparisons</h2>\n",
+            '<p class="note">Every pair of entries on the episodes both scored (the <code>paired</code> view of '
+            '<code>hbmp-bench report</code>): episodes only one of them finished and the exact two-sided '
+            'McNemar p on those. A small p: the gap is more than the luck of these episodes (it says nothing of '
+            'training seeds).</p>\n', filters("paired", {}, text=True),
+            table("paired", ["first", "second", "episodes", "both reached the goal", "only first",
+                             "only second", "neither", "difference (pp)", "p (McNemar)"], rows)]
+
+
+def _km_between_section(data: BoardData) -> list[str]:
+    """HTML of a board page's km between infractions table, one column per infraction kind."""
+    columns = data.km_between.columns
+    rows = [([txt(label, "result_set"), *(num(float(r[k]), k, digits=2) for k in columns)], {})
+            for label, r in data.km_between.iterrows()]
+    return ["<h2>km between infractions</h2>\n",
+            '<p class="note">km driven per infraction event of each kind (the <code>km_between</code> view of '
+            '<code>hbmp-bench report</code>); "no event": none of that kind.</p>\n',
+            table("km-between", ["entry", *(c.replace("_", " ") for c in columns)], rows)]
+
+
+def _provenance_row(data: BoardData, doc: dict) -> tuple[list[Cell], dict[str, str]]:
+    """The row of one entry in a board's provenance table: fingerprints, commit, machine and wall time."""
+    prov = doc["provenance"]
+    machine = prov.get("machine") or {}
+    return ([
+        txt(data.labels[doc["_file"]], "label"),
+        txt(prov.get("code_fingerprint") or "", "provenance.code_fingerprint"),
+        txt(prov.get("agent_fingerprint") or "–", "provenance.agent_fingerprint"),
+        txt(prov.get("git_commit") or "", "provenance.git_commit"), txt(prov.get("package_version") or ""),
+        txt(machine.get("cpu") or "", "provenance.machine.cpu"),
+        num(machine.get("cpu_count"), "provenance.machine.cpu_count"),
+        txt(machine.get("python") or ""), txt(machine.get("platform") or "", "provenance.machine.platform"),
+        txt(prov.get("date_utc") or ""), num(prov.get("wall_time_s"), "provenance.wall_time_s", digits=1),
+        num(prov.get("workers"), "provenance.workers"), txt(prov.get("backend") or ""),
+        txt(((prov.get("salt_commitment") or "")[:10]) if doc.get("salted") else "no"),
+        _file_link(data, doc["_file"]),
+    ], _entry_attrs(doc))
+
+
+def _provenance_section(data: BoardData) -> list[str]:
+    """HTML of a board page's provenance table, with its note."""
+    rows = [_provenance_row(data, doc) for doc in data.entries]
+    return ["<h2>Provenance</h2>\n",
+            '<p class="note">What made each entry: the fingerprints of the package\'s code and of the agent\'s '
+            'weights as they ran, the commit, the machine and the wall time (with its workers).</p>\n',
+            table("provenance", ["entry", "code fingerprint", "weights fingerprint", "commit", "version", "CPU",
+                                 "cores", "Python", "platform", "date (UTC)", "wall s", "workers", "backend",
+                                 "salted", "results file"], rows)]
+
+
+def _matrix_details(data: BoardData, doc: dict) -> str:
+    """HTML of one entry's success per task and town, a table in a collapsed ``<details>``."""
+    matrix = doc["aggregates"].get("success", [])
+    columns = [k for k in (matrix[0] if matrix else {}) if k != "task"]
+    rows = [([txt(row["task"], "task"), *(num(row.get(c), f"success.{c}") for c in columns)], {})
+            for row in matrix]
+    return (f'<details id="matrix-{esc(slug(doc["_file"]))}"><summary>{esc(data.labels[doc["_file"]])} '
+            f'({esc(doc["fidelity"])}, {esc(doc["_file"])})</summary>\n'
+            + table(f"matrix-table-{slug(doc['_file'])}", ["task", *columns], rows, sortable=False)
+            + "</details>\n")
+
+
+def _matrices_section(data: BoardData) -> list[str]:
+    """HTML of a board page's success per task and town, one collapsed table per entry."""
+    return ["<h2>Success per task and town, each entry</h2>\n", *(_matrix_details(data, doc) for doc in data.entries)]
+
+
+def board_page(data: BoardData, boards: Sequence[BoardData], agents: Sequence[str]) -> str:
+    """A board's page: its entries, per town and task, paired comparisons, km between infractions,
+    provenance and each entry's success matrix."""
+    labels = _task_labels()
+    tasks = [t for t in labels if any(t in _entry_tasks(d) for d in data.entries)]
+    selects = _board_selects(data.entries, labels, tasks)
+    parts = [*_board_intro(data), *_entries_section(data, labels, tasks, selects),
+             *_breakdown_section(data, labels, selects), *_paired_section(data), *_km_between_section(data),
+             *_provenance_section(data), *_matrices_section(data)]
     return page(f"Leaderboard {data.board.title}", "".join(parts), boards, agents)
 
 
@@ -353,66 +424,99 @@ def replay_note(replay: dict, episode: dict) -> str:
     return said + f"; the entry recorded {episode.get('end_reason')} at {fmt(float(episode.get('duration_s', 0.0)))} s"
 
 
+def _model_card_section(card: AgentCard | None) -> str:
+    """HTML of an agent's model card facts, or the note that none ships with it."""
+    if card is None:
+        return '<p class="note">No model card ships with this agent (a rule-based or a submitted one).</p>\n'
+    return ('<h2>Model card</h2>\n<dl class="facts">'
+            + "".join(f"<dt>{esc(k)}</dt><dd>{inline(v)}</dd>" for k, v in card.facts) + "</dl>\n")
+
+
+def _curves_section(agent: str, card: AgentCard | None, curves: str | None) -> list[str]:
+    """HTML of an agent's training curves figure and the run it comes from (nothing without curves)."""
+    if not curves:
+        return []
+    parts = [f'<h2>Training curves</h2>\n<img class="figure" src="{esc(curves)}" '
+             f'alt="training curves of {esc(agent)}">\n']
+    if card is not None and card.run_dir is not None:
+        parts.append(f'<p class="note">From the training run <code>{esc(card.run_dir.name)}</code> '
+                     f'(<code>hbmp-bench curves</code> redraws it).</p>\n')
+    return parts
+
+
+def _agent_entry_row(data: BoardData, doc: dict) -> tuple[list[Cell], dict[str, str]]:
+    """The row of one of an agent's entries on its page: the board, the summary and the results file."""
+    s = doc["summary"]
+    return ([
+        txt(data.board.title, "board", f'<a href="{board_file(data)}">{esc(data.board.title)}</a>'),
+        txt(doc["fidelity"], "fidelity"), txt(_yes_no(doc["complete"]), "complete"),
+        num(s.get("success_pct"), "summary.success_pct"),
+        num(s.get("mean_driving_score"), "summary.mean_driving_score"),
+        num(infractions_per_100km(doc), "infractions_per_100km", digits=2),
+        num(s.get("episodes"), "summary.episodes"), num(len(_failures(doc)), "failures"),
+        _file_link(data, doc["_file"]),
+    ], {"board": data.board.slug, "fidelity": doc["fidelity"], "file": doc["_file"]})
+
+
+def _replay_cell(doc: dict, e: dict, gif: tuple[str, dict] | None) -> str:
+    """HTML of a failed episode's replay cell: the replay command, then its GIF and how the replay ended,
+    or why it was not recorded (the command alone without a GIF)."""
+    cell = f"<code>{esc(replay_command(doc, e))}</code>"
+    if gif and gif[0] is None:
+        cell += (f'<br><span class="note bad" data-field="replay">not recorded: '
+                 f'{esc(gif[1]["error"])}</span>')
+    elif gif:
+        path, replay = gif
+        cell += (f'<br><img class="figure" src="{esc(path)}" alt="replay of {esc(e["town"])} '
+                 f'{esc(e["task"])} {e["episode"]}"><br><span class="note" data-field="replay">'
+                 f'{esc(replay_note(replay, e))}</span>')
+    return cell
+
+
+def _failure_row(data: BoardData, doc: dict, e: dict, labels: dict[str, str],
+                 gifs: dict[tuple, tuple[str, dict]] | None) -> tuple[list[Cell], dict[str, str]]:
+    """The row of one failed episode of an entry in an agent's failures table, with its replay cell."""
+    key = (data.board.slug, doc["_file"], int(e["episode"]), e["town"], e["task"])
+    cell = _replay_cell(doc, e, (gifs or {}).get(key))
+    return ([
+        txt(data.board.title, "board"), txt(doc["fidelity"]), txt(e["town"], "town"),
+        txt(labels.get(e["task"], e["task"]), "task"), num(int(e["episode"]), "episode"),
+        num(int(e["seed"]), "seed"), txt(e.get("end_reason") or "", "end_reason"),
+        num(100.0 * float(e.get("route_completion", 0.0)), "route_completion"),
+        Cell(cell, text=True, wrap=True),
+    ], {"board": data.board.slug, "fidelity": doc["fidelity"], "town": e["town"], "task": e["task"]})
+
+
+def _agent_docs(agent: str, boards: Sequence[BoardData]) -> list[tuple[BoardData, dict]]:
+    """An agent's entries on every board, each with its board (boards' order, then entries')."""
+    return [(data, doc) for data in boards for doc in data.entries if doc["agent"] == agent]
+
+
+def _agent_tables(agent: str, boards: Sequence[BoardData],
+                  gifs: dict[tuple, tuple[str, dict]] | None) -> list[str]:
+    """HTML of an agent page's entries table and its failed episodes table (with their note and filter)."""
+    labels = _task_labels()
+    docs = _agent_docs(agent, boards)
+    rows = [_agent_entry_row(data, doc) for data, doc in docs]
+    failure_rows = [_failure_row(data, doc, e, labels, gifs)
+                    for data, doc in docs for e in _failures(doc)[:FAILURES_PER_ENTRY]]
+    return ["<h2>Entries</h2>\n", table("agent-entries", ["board", "fidelity", "complete", "success %",
+                                                        "driving score", "infractions / 100 km", "episodes",
+                                                        "failed episodes", "results file"], rows),
+            "<h2>Failed episodes</h2>\n",
+            f'<p class="note">The first {FAILURES_PER_ENTRY} failed episodes of each entry (town, task, episode '
+            'order) and the command that replays one as a top-down GIF: episodes are deterministic given their '
+            'seed. An episode on an imported town (CARLA\'s) replays once the map is imported under that name '
+            '(<code>hbmp-bench maps import</code>).</p>\n', filters("failures", {}, text=True),
+            table("failures", ["board", "fidelity", "town", "task", "episode", "seed", "end", "route completion %",
+                               "replay"], failure_rows)]
+
+
 def agent_page(agent: str, card: AgentCard | None, curves: str | None, boards: Sequence[BoardData],
                agents: Sequence[str], gifs: dict[tuple, tuple[str, dict]] | None = None) -> str:
-    labels = _task_labels()
-    parts = [f"<h1>Agent: {esc(agent)}</h1>\n"]
-    if card is not None:
-        parts.append('<h2>Model card</h2>\n<dl class="facts">'
-                     + "".join(f"<dt>{esc(k)}</dt><dd>{inline(v)}</dd>" for k, v in card.facts) + "</dl>\n")
-    else:
-        parts.append('<p class="note">No model card ships with this agent (a rule-based or a submitted one).</p>\n')
-    if curves:
-        parts.append(f'<h2>Training curves</h2>\n<img class="figure" src="{esc(curves)}" '
-                     f'alt="training curves of {esc(agent)}">\n')
-        if card is not None and card.run_dir is not None:
-            parts.append(f'<p class="note">From the training run <code>{esc(card.run_dir.name)}</code> '
-                         f'(<code>hbmp-bench curves</code> redraws it).</p>\n')
-    rows, failure_rows = [], []
-    for data in boards:
-        for doc in data.entries:
-            if doc["agent"] != agent:
-                continue
-            s = doc["summary"]
-            rows.append(([
-                txt(data.board.title, "board", f'<a href="{board_file(data)}">{esc(data.board.title)}</a>'),
-                txt(doc["fidelity"], "fidelity"), txt("yes" if doc["complete"] else "no", "complete"),
-                num(s.get("success_pct"), "summary.success_pct"),
-                num(s.get("mean_driving_score"), "summary.mean_driving_score"),
-                num(infractions_per_100km(doc), "infractions_per_100km", digits=2),
-                num(s.get("episodes"), "summary.episodes"), num(len(_failures(doc)), "failures"),
-                txt(doc["_file"], None, f'<a href="{raw_path(data, doc["_file"])}">{esc(doc["_file"])}</a>'),
-            ], {"board": data.board.slug, "fidelity": doc["fidelity"], "file": doc["_file"]}))
-            for e in _failures(doc)[:FAILURES_PER_ENTRY]:
-                key = (data.board.slug, doc["_file"], int(e["episode"]), e["town"], e["task"])
-                gif = (gifs or {}).get(key)
-                command = replay_command(doc, e)
-                cell = f"<code>{esc(command)}</code>"
-                if gif and gif[0] is None:
-                    cell += (f'<br><span class="note bad" data-field="replay">not recorded: '
-                             f'{esc(gif[1]["error"])}</span>')
-                elif gif:
-                    path, replay = gif
-                    cell += (f'<br><img class="figure" src="{esc(path)}" alt="replay of {esc(e["town"])} '
-                             f'{esc(e["task"])} {e["episode"]}"><br><span class="note" data-field="replay">'
-                             f'{esc(replay_note(replay, e))}</span>')
-                failure_rows.append(([
-                    txt(data.board.title, "board"), txt(doc["fidelity"]), txt(e["town"], "town"),
-                    txt(labels.get(e["task"], e["task"]), "task"), num(int(e["episode"]), "episode"),
-                    num(int(e["seed"]), "seed"), txt(e.get("end_reason") or "", "end_reason"),
-                    num(100.0 * float(e.get("route_completion", 0.0)), "route_completion"),
-                    Cell(cell, text=True, wrap=True),
-                ], {"board": data.board.slug, "fidelity": doc["fidelity"], "town": e["town"], "task": e["task"]}))
-    parts += ["<h2>Entries</h2>\n", table("agent-entries", ["board", "fidelity", "complete", "success %",
-                                                          "driving score", "infractions / 100 km", "episodes",
-                                                          "failed episodes", "results file"], rows)]
-    parts += ["<h2>Failed episodes</h2>\n",
-              f'<p class="note">The first {FAILURES_PER_ENTRY} failed episodes of each entry (town, task, episode '
-              'order) and the command that replays one as a top-down GIF: episodes are deterministic given their '
-              'seed. An episode on an imported town (CARLA\'s) replays once the map is imported under that name '
-              '(<code>hbmp-bench maps import</code>).</p>\n', filters("failures", {}, text=True),
-              table("failures", ["board", "fidelity", "town", "task", "episode", "seed", "end", "route completion %",
-                                 "replay"], failure_rows)]
+    """An agent's page: its model card, training curves, entries and failed episodes (with their GIFs)."""
+    parts = [f"<h1>Agent: {esc(agent)}</h1>\n", _model_card_section(card), *_curves_section(agent, card, curves),
+             *_agent_tables(agent, boards, gifs)]
     return page(f"Agent {agent}", "".join(parts), boards, agents)
 
 
@@ -435,62 +539,88 @@ def _matrix_value(doc: dict | None, town: str, task: str) -> float | None:
     return None
 
 
-def paper_page(claims: list[list[str]], boards: Sequence[BoardData], agents: Sequence[str]) -> str:
-    labels = _task_labels()
-    parts = ["<h1>Paper reproduction</h1>\n", f"<p>{esc(PAPER)}: the paper's claims against this benchmark's "
-             "boards.</p>\n"]
-    if claims:
-        header, body = claims[0], claims[1:]
-        parts.append("<h2>Claims</h2>\n")
-        parts.append('<p class="note">From <code>docs/paper-reproduction.md</code>, where each figure has its '
-                     'command, its paired test and the replays behind each miss.</p>\n')
-        parts.append(table("claims", header, [([Cell(inline(c), text=True, wrap=True) for c in row], {}) for row in body],
-                           sortable=False))
-    hbmp = _entry(boards, "hbmp", "hbmp")
+def _claims_section(claims: list[list[str]]) -> list[str]:
+    """HTML of the paper page's claims table (a header row, then one row per claim; nothing without claims)."""
+    if not claims:
+        return []
+    header, body = claims[0], claims[1:]
+    return ["<h2>Claims</h2>\n",
+            '<p class="note">From <code>docs/paper-reproduction.md</code>, where each figure has its '
+            'command, its paired test and the replays behind each miss.</p>\n',
+            table("claims", header, [([Cell(inline(c), text=True, wrap=True) for c in row], {}) for row in body],
+                  sortable=False)]
+
+
+def _table_i_row(town: str, task: str, value: float, labels: dict[str, str], hbmp: dict | None,
+                 corl: dict | None, carla: dict | None) -> tuple[list[Cell], dict[str, str]]:
+    """The row of one town and task of Tab. I: the paper's value, the three boards' and the difference."""
+    here = _matrix_value(hbmp, town, task)
+    return ([txt(town, "town"), txt(labels[task], "task"), num(value, "paper"),
+             num(here, "hbmp"), num(_matrix_value(corl, town, task), "corl2017"),
+             num(_matrix_value(carla, f"CARLA_{town}", task), "carla"),
+             num(None if here is None else here - value, "difference")],
+            {"town": town, "task": task})
+
+
+def _table_i_section(boards: Sequence[BoardData], labels: dict[str, str], hbmp: dict | None) -> list[str]:
+    """HTML of the paper page's Tab. I against the shipped ``hbmp`` on the hbmp, corl2017 and CARLA boards."""
     corl = _entry(boards, "corl2017", "hbmp")
     carla = _entry(boards, "carla-hbmp", "hbmp")
-    parts.append("<h2>Tab. I: success % in Town1 and Town2</h2>\n")
-    parts.append('<p class="note">The shipped <code>hbmp</code>, continuous fidelity: the <code>hbmp</code> suite '
-                 '(the paper\'s protocol, 40 episodes per task), the <code>corl2017</code> suite (25 per task, its '
-                 'own rules) and the <code>hbmp</code> suite on CARLA\'s own Town01 and Town02 (imported from '
-                 'CARLA\'s OpenDRIVE files).</p>\n')
-    rows = []
-    for town, paper in PAPER_TABLE_I.items():
-        for task, value in paper.items():
-            here = _matrix_value(hbmp, town, task)
-            rows.append(([txt(town, "town"), txt(labels[task], "task"), num(value, "paper"),
-                          num(here, "hbmp"), num(_matrix_value(corl, town, task), "corl2017"),
-                          num(_matrix_value(carla, f"CARLA_{town}", task), "carla"),
-                          num(None if here is None else here - value, "difference")],
-                         {"town": town, "task": task}))
-    parts.append(table("table-i", ["town", "task", "paper", "here: hbmp suite", "here: corl2017",
-                                   "here: CARLA's own town", "hbmp suite − paper (pp)"], rows))
-    parts.append(f"<h2>Fig. town15: more than {PAPER_TOWN15_PCT:.0f} % in every town</h2>\n")
-    rows = []
+    rows = [_table_i_row(town, task, value, labels, hbmp, corl, carla)
+            for town, paper in PAPER_TABLE_I.items() for task, value in paper.items()]
+    return ["<h2>Tab. I: success % in Town1 and Town2</h2>\n",
+            '<p class="note">The shipped <code>hbmp</code>, continuous fidelity: the <code>hbmp</code> suite '
+            '(the paper\'s protocol, 40 episodes per task), the <code>corl2017</code> suite (25 per task, its '
+            'own rules) and the <code>hbmp</code> suite on CARLA\'s own Town01 and Town02 (imported from '
+            'CARLA\'s OpenDRIVE files).</p>\n',
+            table("table-i", ["town", "task", "paper", "here: hbmp suite", "here: corl2017",
+                              "here: CARLA's own town", "hbmp suite − paper (pp)"], rows)]
+
+
+def _town15_row(town: str, task: str, labels: dict[str, str],
+                hbmp: dict | None) -> tuple[list[Cell], dict[str, str]]:
+    """The row of one task and town of Fig. town15: the hbmp board's success % and whether it is met."""
+    here = _matrix_value(hbmp, town, task)
+    met = here is not None and here > PAPER_TOWN15_PCT
+    return ([txt(labels[task], "task"), txt(town, "town"), num(here, "hbmp"),
+             Cell(f'<span class="{"good" if met else "bad"}">{"met" if met else "not met"}</span>',
+                  text=True, field="verdict")], {"town": town, "task": task})
+
+
+def _town15_section(labels: dict[str, str], hbmp: dict | None) -> list[str]:
+    """HTML of the paper page's Fig. town15 verdicts, per task and every town of the ``hbmp`` entry."""
     towns = sorted({k for row in (hbmp or {}).get("aggregates", {}).get("success", []) for k in row if k != "task"})
-    for task in ("Navigation", "NavigationDynamic"):
-        for town in towns:
-            here = _matrix_value(hbmp, town, task)
-            met = here is not None and here > PAPER_TOWN15_PCT
-            rows.append(([txt(labels[task], "task"), txt(town, "town"), num(here, "hbmp"),
-                          Cell(f'<span class="{"good" if met else "bad"}">{"met" if met else "not met"}</span>',
-                               text=True, field="verdict")], {"town": town, "task": task}))
-    parts.append(table("town15", ["task", "town", "here: hbmp suite %", "verdict"], rows))
+    rows = [_town15_row(town, task, labels, hbmp) for task in ("Navigation", "NavigationDynamic") for town in towns]
+    return [f"<h2>Fig. town15: more than {PAPER_TOWN15_PCT:.0f} % in every town</h2>\n",
+            table("town15", ["task", "town", "here: hbmp suite %", "verdict"], rows)]
+
+
+def _paper_paired_section(boards: Sequence[BoardData]) -> list[str]:
+    """HTML of the paper page's paired table: the ``hbmp`` board's pairs of :data:`PAPER_AGENTS` (nothing
+    without that board or its pairs)."""
     board = next((b for b in boards if b.board.slug == "hbmp"), None)
-    if board is not None and not board.paired.empty:
-        parts.append("<h2>Paired: is a gap more than the luck of the episodes?</h2>\n")
-        rows = []
-        for (first, second), r in board.paired.iterrows():
-            if first.split(" ")[0] in ("hbmp", "il", "hbmp-s", "expert") and second.split(" ")[0] in (
-                    "hbmp", "il", "hbmp-s", "expert"):
-                rows.append(([txt(first, "first"), txt(second, "second"), num(int(r["only_first"]), "only_first"),
-                              num(int(r["only_second"]), "only_second"),
-                              Cell(esc(f"{float(r['p_mcnemar']):.3g}"), sort=repr(float(r["p_mcnemar"])),
-                                   field="p_mcnemar")], {}))
-        parts.append('<p class="note">The <code>hbmp</code> board\'s paired view (<code>hbmp-bench report '
-                     'leaderboards/hbmp</code>): episodes only the first / only the second finished, exact '
-                     'McNemar p.</p>\n')
-        parts.append(table("paper-paired", ["first", "second", "only first", "only second", "p (McNemar)"], rows))
+    if board is None or board.paired.empty:
+        return []
+    rows = [([txt(first, "first"), txt(second, "second"), num(int(r["only_first"]), "only_first"),
+              num(int(r["only_second"]), "only_second"), _p_cell(r)], {})
+            for (first, second), r in board.paired.iterrows()
+            if first.split(" ")[0] in PAPER_AGENTS and second.split(" ")[0] in PAPER_AGENTS]
+    return ["<h2>Paired: is a gap more than the luck of the episodes?</h2>\n",
+            '<p class="note">The <code>hbmp</code> board\'s paired view (<code>hbmp-bench report '
+            'leaderboards/hbmp</code>): episodes only the first / only the second finished, exact '
+            'McNemar p.</p>\n',
+            table("paper-paired", ["first", "second", "only first", "only second", "p (McNemar)"], rows)]
+
+
+def paper_page(claims: list[list[str]], boards: Sequence[BoardData], agents: Sequence[str]) -> str:
+    """The paper reproduction page: the claims, Tab. I and Fig. town15 against the boards, and the paired
+    comparisons of the ``hbmp`` board."""
+    labels = _task_labels()
+    hbmp = _entry(boards, "hbmp", "hbmp")
+    parts = ["<h1>Paper reproduction</h1>\n", f"<p>{esc(PAPER)}: the paper's claims against this benchmark's "
+             "boards.</p>\n", *_claims_section(claims), *_table_i_section(boards, labels, hbmp),
+             *_town15_section(labels, hbmp),
+             *_paper_paired_section(boards)]
     return page("Paper reproduction", "".join(parts), boards, agents)
 
 
