@@ -130,10 +130,10 @@ def breakdown(df: pd.DataFrame) -> pd.DataFrame:
     :data:`INFRACTION_KINDS`, as the summary's km per infraction counts them), ``success_pct``
     and ``infractions_per_km`` (0 where nothing was driven)."""
     from hbmp_bench.metrics import report
-    from hbmp_bench.scenarios import TASKS
+    from hbmp_bench.scenarios import all_tasks
 
     rows = []
-    for task in [t for t in TASKS if t in set(df["task"])]:
+    for task in [t for t in all_tasks() if t in set(df["task"])]:
         part = df[df["task"] == task]
         counts = report.failure_counts(part).reset_index()
         scored = report.scored(part)
