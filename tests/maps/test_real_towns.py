@@ -15,7 +15,7 @@ import pytest
 from hbmp_bench.maps import import_map, map_info, map_stats, net_path, net_stats
 from hbmp_bench.maps.lanetypes import CAR_LANE_TYPES, lane_type
 from hbmp_bench.maps.signals import ALL_RED_TIME_S, read_programs, yellow_time
-from hbmp_bench.scenarios import SUITES, TASKS, road_network, suite_episodes
+from hbmp_bench.scenarios import SCENARIO_TYPES, SUITES, TASKS, road_network, selection_size, suite_episodes
 from hbmp_bench.scenarios.suites import MIN_ROUTE_SPEED_MPS
 
 CARLA_DIR = Path(os.environ.get("HBMP_CARLA_MAPS") or Path(__file__).resolve().parents[3] / "shared" / "maps" / "carla")
@@ -74,7 +74,10 @@ def test_every_episode_of_every_suite_starts_and_ends_on_a_driving_lane(town):
         for suite in SUITES.values():
             for task in suite.tasks:
                 episodes = suite_episodes(suite.name, name, task)
-                assert len(episodes) == suite.episodes_per_task
+                if task in SCENARIO_TYPES:  # a type has no episode where the town cannot host it, fewer if rare
+                    assert len(episodes) <= suite.episodes_per_task
+                else:
+                    assert len(episodes) == suite.episodes_per_task
                 for ep in episodes:
                     for lane, edge in ((ep.start_lane, ep.route[0]), (ep.goal_lane, ep.route[-1])):
                         assert types[lane] in CAR_LANE_TYPES, (suite.name, ep.key, lane, types[lane])
@@ -189,7 +192,8 @@ def test_sumo_keeps_its_lanes_by_the_detectors_on_every_route(town):
         name = f"{town}_{kind}"
         import_map(src, name, lights="lawful")
         audit = audit_lane_keeping(name)
-        assert audit.episodes == sum(s.episodes_per_task * len(s.tasks) for s in SUITES.values())
+        assert audit.episodes == sum(selection_size(s.name, [name], s.tasks, range(s.episodes_per_task))
+                                     for s in SUITES.values())
         assert audit.distance_km > 20.0 * audit.drives / 1000.0  # every drive went somewhere
         assert not audit.stuck, audit.stuck
         assert not audit.disagreements, "\n".join(map(str, audit.disagreements))
