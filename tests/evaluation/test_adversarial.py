@@ -78,7 +78,9 @@ def test_channel_attacks_are_the_agents_failures(agent_dir):
 
 
 def test_half_a_reply_neither_blocks_the_env_nor_trips_its_watchdog(agent_dir):
-    limits = RunnerLimits(decision_timeout_s=2.5, watchdog_s=1.0, max_decisions=4, retries=0)
+    # the watchdog shorter than the decision timeout, which must still end the stalled reply (2 s, not 1: on a
+    # loaded machine the simulation's own start-up took a second without progress, a sim_error)
+    limits = RunnerLimits(decision_timeout_s=2.5, watchdog_s=2.0, max_decisions=4, retries=0)
     start = time.monotonic()
     records = run(["HalfFrameAgent"], limits)
     assert_counted_failure(records["HalfFrameAgent"], "did not answer act() at decision 1 within 2.5 s")
