@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from hbmp_bench.errors import ConfigError, UserError
-from hbmp_bench.scenarios import all_tasks, check_task, check_town, get_suite
+from hbmp_bench.scenarios import all_tasks, check_task, check_town, get_suite, held_episodes
 
 if TYPE_CHECKING:
     from hbmp_bench.evaluation.channel import AgentDescription
@@ -233,13 +233,9 @@ def suite_tasks(
     WorldConfig(fidelity=fidelity)  # a bad fidelity fails here, naming the valid ones, not in every episode
     order = {t: k for k, t in enumerate(all_tasks())}
     tasks = sorted(tasks, key=lambda t: order[t])
-    from hbmp_bench.scenarios import SCENARIO_TYPES, suite_episodes
-
-    def held(town, task):  # a scenario type's list is shorter (empty) where the town cannot host it all
-        return len(suite_episodes(spec.name, town, task)) if task in SCENARIO_TYPES else spec.episodes_per_task
-
+    held = {(town, task): held_episodes(spec.name, town, task) for town in towns for task in tasks}
     return [EpisodeTask(spec.name, town, task, i, agent, fidelity, salt) for town in towns for task in tasks
-            for i in indices if i < held(town, task)]
+            for i in indices if i < held[town, task]]
 
 
 def adopt_environment(environ: dict[str, str] | None) -> None:

@@ -393,12 +393,13 @@ class RedLightRunner(Script):
     lawful driver sees it come, well over its limit, at its red (the privileged scene's ``foe_speeding``)."""
 
     RUNNER = "sc_runner"
+    hazard_kind = "red_light"
     SPEED_FACTOR = 1.3
     FROM_M = 70.0
 
     def __init__(self, episode, net, rng):
         super().__init__(episode, net, rng)
-        self.hazard = junction_hazard(net, episode, "red_light")
+        self.hazard = junction_hazard(net, episode, self.hazard_kind)
         self.phase = "wait"
 
     def tick(self, sim, ego):
@@ -510,6 +511,11 @@ def all_tasks() -> tuple[str, ...]:
     return (*TASKS, *SCENARIO_TYPES)
 
 
+def _hosts_hazard(script: type[Script]) -> Callable[[RoadNetwork, Episode], bool]:
+    """``fits`` of a junction hazard's type: its route has a junction of the script's ``hazard_kind``."""
+    return lambda net, ep: junction_hazard(net, ep, script.hazard_kind) is not None
+
+
 register_scenario_type(ScenarioType(
     "HardBrake", "Emergency brake", "Straight",
     lambda net, ep: _remaining_m(net, ep) >= HardBrake.AHEAD_M + 30.0,
@@ -526,21 +532,21 @@ register_scenario_type(ScenarioType(
 
 register_scenario_type(ScenarioType(
     "UnprotectedLeft", "Intersections", "OneTurn",
-    lambda net, ep: junction_hazard(net, ep, "unprotected_left") is not None,
+    _hosts_hazard(UnprotectedLeft),
     UnprotectedLeft, "A left turn at a light across a stream of oncoming cars."))
 register_scenario_type(ScenarioType(
     "GiveWay", "Give way", "Navigation",
-    lambda net, ep: junction_hazard(net, ep, "give_way") is not None,
+    _hosts_hazard(GiveWay),
     GiveWay, "An unsignalised junction where the ego yields to cars crossing on the priority road."))
 
 
 register_scenario_type(ScenarioType(
     "RedLightRunner", "Traffic signs", "Straight",
-    lambda net, ep: junction_hazard(net, ep, "red_light") is not None,
+    _hosts_hazard(RedLightRunner),
     RedLightRunner, "A car runs its red across the ego's green, well over its speed limit."))
 register_scenario_type(ScenarioType(
     "Merge", "Merging", "Navigation",
-    lambda net, ep: junction_hazard(net, ep, "merge") is not None,
+    _hosts_hazard(Merge),
     Merge, "A merge without a light into a road with a dense stream of cars (an on-ramp in Town04)."))
 register_scenario_type(ScenarioType(
     "LongRoute", "Navigation", "Navigation",

@@ -519,16 +519,18 @@ def _scenario_episodes(suite: Suite, town: str, kind: ScenarioType) -> tuple[Epi
     return tuple(episodes)
 
 
+def held_episodes(suite_name: str, town: str, task: str) -> int:
+    """Episodes a suite holds for one (town, task): ``episodes_per_task``, fewer for a scenario type in a town
+    that cannot host all of it (``_scenario_episodes``: none where it does not fit)."""
+    if task in SCENARIO_TYPES:
+        return len(suite_episodes(suite_name, town, task))
+    return get_suite(suite_name).episodes_per_task
+
+
 def selection_size(suite_name: str, towns, tasks, indices) -> int:
-    """Episodes a selection of a suite holds: every (town, task, index) but the indices past a scenario
-    type's list in a town that cannot host all of it (``_scenario_episodes``: none where it does not fit);
-    the CoRL2017 tasks have ``episodes_per_task`` in every town."""
-    n = 0
-    for town in towns:
-        for task in tasks:
-            have = len(suite_episodes(suite_name, town, task)) if task in SCENARIO_TYPES else None
-            n += sum(1 for i in indices if have is None or i < have)
-    return n
+    """Episodes a selection of a suite holds: every (town, task, index) but the indices past
+    :func:`held_episodes`."""
+    return sum(sum(1 for i in indices if i < held_episodes(suite_name, town, task)) for town in towns for task in tasks)
 
 
 def all_episodes(suite_name: str) -> list[Episode]:
