@@ -35,12 +35,12 @@ from hbmp_bench.envs.observation import ObservationBuilder, road_profile, road_v
 from hbmp_bench.envs.privileged import LIGHTS_RANGE_M, PrivilegedScene
 from hbmp_bench.envs.scene import Scene
 from hbmp_bench.maps.roadnet import RoadNetwork
-from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents, StopLine
+from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents, StopLine, update_all
 from hbmp_bench.metrics.episode import GOAL_UNREACHABLE, EpisodeScorer, events_reward
 from hbmp_bench.metrics.geometry import LaneLocator, stop_line_of
 from hbmp_bench.planning.behaviors import BEHAVIORS, Behavior
 from hbmp_bench.scenarios import Episode
-from hbmp_bench.sim.sumo import Actors, LightAhead, SumoSim, VehicleState, VehicleType
+from hbmp_bench.sim.sumo import LEVEL_CLEARANCE_M, Actors, LightAhead, SumoSim, VehicleState, VehicleType
 
 ROUTE_HORIZON_EDGES = 8
 """A circulating vehicle's route is extended when fewer edges than this are left on it."""
@@ -177,24 +177,35 @@ class ControlledVehicle:
 
     def after_sim_step(self, snapshot: Actors) -> StepEvents:
         """Detection after one simulation step (``snapshot``: every actor now); sets ``end_reason``
-        when its episode ends."""
+        when its episode ends. (The world does this for all its vehicles at once: :func:`after_sim_steps`.)"""
+        frame = self.sense(snapshot)
+        if frame is None:
+            return StepEvents()
+        actors = self.actors
+        return self.judge(self.detector.update(frame, actors.ids, actors.xy, actors.yaw, actors.length, actors.width,
+                                               actors.is_pedestrian, self.shared.sim.time))
+
+    def sense(self, snapshot: Actors) -> EgoFrame | None:
+        """The first half of :meth:`after_sim_step`: the new state, followed lane, route progress and
+        actors around; the frame the detector judges, or None (``end_reason`` set) when the vehicle has
+        left the network."""
         sim, net = self.shared.sim, self.shared.net
         state = sim.vehicle_state(self.id)
         if state is None or self.id in sim.arrived_ids() or self.driver.off_map:
             self.end_reason = "left_network"  # also: driven so far off the road SUMO cannot place it
-            return StepEvents()
+            return None
         self.state = state = self.driver.observe(state)
         if state.lane in net.lanes and (not self.followed_lane or net.within_reach(self.followed_lane, state.lane)):
             self.followed_lane = state.lane  # (not a jump onto another level: RoadNetwork.within_reach)
         self.route.moved()
-        self.actors = actors = snapshot.around(self.id)
+        self.actors = snapshot.around(self.id)
         lane = self.followed_lane
-        ev = self.detector.update(
-            EgoFrame(state.xy, state.yaw, self.vtype.length, self.vtype.width,
-                     followed_stop_line(sim, self.shared.locator, lane, next(iter(self.next_edges(1)), None)),
-                     net.lanes[lane].edge if lane in net.lanes else ""),
-            actors.ids, actors.xy, actors.yaw, actors.length, actors.width, actors.is_pedestrian, sim.time,
-        )
+        return EgoFrame(state.xy, state.yaw, self.vtype.length, self.vtype.width,
+                        followed_stop_line(sim, self.shared.locator, lane, next(iter(self.next_edges(1)), None)),
+                        net.lanes[lane].edge if lane in net.lanes else "")
+
+    def judge(self, ev: StepEvents) -> StepEvents:
+        """The second half of :meth:`after_sim_step`: ``end_reason`` from the detector's events ``ev``."""
         if ev.goal_reached:
             self.end_reason = "goal"
         elif ev.collisions and (self.rules.on_violation or self.rules.on_collision):
@@ -253,6 +264,30 @@ class ControlledVehicle:
         }
         return {"occupancy": occupancy, "road": road}, info
 
+
+
+def after_sim_steps(vehicles: list[ControlledVehicle], snapshot: Actors) -> list[StepEvents]:
+    """:meth:`ControlledVehicle.after_sim_step` of every vehicle, in order, with their detectors run in
+    one pass (:func:`~hbmp_bench.metrics.detectors.update_all`): the same events, states and ends as
+    one call per vehicle (tested against it)."""
+    frames = [v.sense(snapshot) for v in vehicles]
+    judged = [k for k, f in enumerate(frames) if f is not None]
+    out = [StepEvents() for _ in vehicles]
+    if not judged:
+        return out
+    at = {actor: k for k, actor in enumerate(snapshot.ids)}
+    visible = np.ones((len(judged), len(snapshot)), dtype=bool)
+    for row, k in enumerate(judged):  # Actors.around, as a mask
+        i = at.get(vehicles[k].id)
+        if i is not None:
+            visible[row] = np.abs(snapshot.z - snapshot.z[i]) < LEVEL_CLEARANCE_M
+            visible[row, i] = False
+    events = update_all([vehicles[k].detector for k in judged], [frames[k] for k in judged], snapshot.ids,
+                        snapshot.xy, snapshot.yaw, snapshot.length, snapshot.width, snapshot.is_pedestrian, visible,
+                        vehicles[0].shared.sim.time)
+    for k, ev in zip(judged, events):
+        out[k] = vehicles[k].judge(ev)
+    return out
 
 class LoopRoute:
     """A circulating route (background agents): see the module docstring.

@@ -158,26 +158,36 @@ class InfractionDetector:
 
     def update(self, ego: EgoFrame, others_ids, others_xy, others_yaw, others_len, others_wid, others_ped, time_s: float) -> StepEvents:
         """Detect this step's events; ``others_*`` are (K,) arrays of the other actors, ``time_s`` [s]."""
-        ev = StepEvents()
-        heading = np.array([np.cos(ego.yaw), np.sin(ego.yaw)])
         near = np.hypot(*(others_xy - ego.xy).T) < (ego.length + others_len) if len(others_ids) else np.zeros(0, bool)
-        touching = set()
+        hits: list[tuple[str, bool]] = []
         if near.any():
             box = box_corners(ego.xy[None], np.array([ego.yaw]), np.array([ego.length]), np.array([ego.width]))[0]
             idx = np.nonzero(near)[0]
             hit = boxes_overlap(box, box_corners(others_xy[idx], others_yaw[idx], others_len[idx], others_wid[idx]))
-            touching = {others_ids[i] for i in idx[hit]}
-            for i in idx[hit]:
-                if others_ids[i] not in self._touching:
-                    if others_ped[i]:
-                        ev.collision_pedestrian += 1
-                    else:
-                        ev.collision_vehicle += 1
+            hits = [(others_ids[i], bool(others_ped[i])) for i in idx[hit]]
+        heading = np.array([np.cos(ego.yaw), np.sin(ego.yaw)])
+        points = footprint_points(ego.xy, ego.yaw, ego.length, ego.width)
+        located = self.locator.locate(points, prefer_edge=ego.edge)
+        return self._events(ego, heading, hits, _lane_state(located, heading), time_s)
+
+    def _events(self, ego: EgoFrame, heading: np.ndarray, hits: list[tuple[str, bool]],
+                lane_state: tuple[bool | None, bool | None], time_s: float) -> StepEvents:
+        """The step's events from what the footprint touches (``hits``: (actor id, is pedestrian) of every
+        overlapping actor) and its lane state (:func:`_lane_state`); updates the detector's state."""
+        ev = StepEvents()
+        touching = set()
+        for actor, pedestrian in hits:
+            touching.add(actor)
+            if actor not in self._touching:
+                if pedestrian:
+                    ev.collision_pedestrian += 1
+                else:
+                    ev.collision_vehicle += 1
         ev.collided_with = tuple(sorted(touching - self._touching))
         self._touching = frozenset(touching)
 
         moved_m = 0.0 if self._xy is None else float(np.hypot(*(ego.xy - self._xy)))
-        wrong, off = self._lane_state(ego, heading)
+        wrong, off = lane_state
         ev.wrong_lane = self._wrong.update(wrong, moved_m, time_s)
         ev.off_road = self._off.update(off, moved_m, time_s)
 
@@ -194,19 +204,6 @@ class InfractionDetector:
             self.totals[kind] += getattr(ev, kind)
         return ev
 
-    def _lane_state(self, ego: EgoFrame, heading: np.ndarray) -> tuple[bool | None, bool | None]:
-        """(wrong lane, off-road) of the footprint now; (None, None) while it is mostly in a junction."""
-        points = footprint_points(ego.xy, ego.yaw, ego.length, ego.width)
-        lane, direction, in_junction = self.locator.locate(points, prefer_edge=ego.edge)
-        judged = ~in_junction
-        n = int(judged.sum())
-        if n <= (1.0 - JUNCTION_HOLD_FRACTION) * len(points):
-            return None, None
-        on_lane = lane >= 0
-        against = judged & on_lane & (direction @ heading < 0.0)
-        off = judged & ~on_lane
-        return bool(against.sum() > WRONG_LANE_FRACTION * n), bool(off.sum() > OFF_ROAD_FRACTION * n)
-
     def _ran_red(self, front_before: np.ndarray, front: np.ndarray, line: StopLine | None) -> str:
         """The lane whose red stop line the front bumper's move crossed, else "".
 
@@ -220,3 +217,58 @@ class InfractionDetector:
             if ln.lane != self._red_lane and ln.signal in RED_STATES and crosses_line(front_before, front, ln.ends, ln.direction):
                 return ln.lane
         return ""
+
+
+def _lane_state(located: tuple[np.ndarray, np.ndarray, np.ndarray], heading: np.ndarray) -> tuple[bool | None, bool | None]:
+    """(wrong lane, off-road) of a footprint from its points' lane lookup ``located`` (lane (P,), direction
+    (P, 2), in_junction (P,): :meth:`~hbmp_bench.metrics.geometry.LaneLocator.locate`) and the heading (2,);
+    (None, None) while it is mostly in a junction."""
+    lane, direction, in_junction = located
+    judged = ~in_junction
+    n = int(judged.sum())
+    if n <= (1.0 - JUNCTION_HOLD_FRACTION) * len(lane):
+        return None, None
+    on_lane = lane >= 0
+    against = judged & on_lane & (direction @ heading < 0.0)
+    off = judged & ~on_lane
+    return bool(against.sum() > WRONG_LANE_FRACTION * n), bool(off.sum() > OFF_ROAD_FRACTION * n)
+
+
+def update_all(detectors: list[InfractionDetector], frames: list[EgoFrame], ids, xy, yaw, length, width,
+               is_pedestrian, visible: np.ndarray, time_s: float) -> list[StepEvents]:
+    """:meth:`InfractionDetector.update` of N vehicles in one pass: the same events and detector states
+    as one call per vehicle (tested), with the contact test, the footprints and their lane lookup done
+    for all N at once.
+
+    Args:
+        detectors / frames: (N,) each vehicle's detector and its frame now.
+        ids, xy, yaw, length, width, is_pedestrian: (K,) every actor now (the snapshot, the N vehicles
+            among them).
+        visible: (N, K) bool, the actors vehicle ``n`` can meet (``Actors.around``: itself excluded).
+        time_s: simulation time [s].
+    """
+    n = len(frames)
+    if n == 0:
+        return []
+    ego_xy = np.array([f.xy for f in frames], dtype=float).reshape(n, 2)
+    ego_yaw = np.array([f.yaw for f in frames], dtype=float)
+    ego_len = np.array([f.length for f in frames], dtype=float)
+    ego_wid = np.array([f.width for f in frames], dtype=float)
+    hits: list[list[tuple[str, bool]]] = [[] for _ in range(n)]
+    if len(ids):
+        dist = np.hypot(xy[None, :, 0] - ego_xy[:, 0:1], xy[None, :, 1] - ego_xy[:, 1:2])
+        near = (dist < ego_len[:, None] + length[None, :]) & visible
+        rows, cols = np.nonzero(near)
+        if len(rows):
+            boxes = box_corners(ego_xy[rows], ego_yaw[rows], ego_len[rows], ego_wid[rows])
+            hit = boxes_overlap(boxes, box_corners(xy[cols], yaw[cols], length[cols], width[cols]))
+            for r, c in zip(rows[hit].tolist(), cols[hit].tolist()):
+                hits[r].append((ids[c], bool(is_pedestrian[c])))
+    points = np.stack([footprint_points(f.xy, f.yaw, f.length, f.width) for f in frames])
+    located = detectors[0].locator.locate_all(points, [f.edge for f in frames])
+    out = []
+    for k, (detector, frame) in enumerate(zip(detectors, frames)):
+        heading = np.array([np.cos(frame.yaw), np.sin(frame.yaw)])
+        state = _lane_state((located[0][k], located[1][k], located[2][k]), heading)
+        out.append(detector._events(frame, heading, hits[k], state, time_s))
+    return out

@@ -20,7 +20,8 @@ def box_corners(xy: np.ndarray, yaw: np.ndarray, length: np.ndarray, width: np.n
 
 
 def boxes_overlap(box: np.ndarray, others: np.ndarray) -> np.ndarray:
-    """Separating-axis test of one box (4, 2) against K boxes (K, 4, 2) → (K,) bool (touching counts)."""
+    """Separating-axis test of one box (4, 2), or of K boxes pairwise (K, 4, 2), against K boxes (K, 4, 2)
+    → (K,) bool (touching counts)."""
     if len(others) == 0:
         return np.zeros(0, dtype=bool)
     a = np.broadcast_to(box, others.shape)
@@ -237,6 +238,19 @@ class LaneLocator:
         return locate_points(points, candidates, self._bounds, self.a, self.unit, self.seg_len, self.half_width,
                              self.lane_index, self._segment_edge, self._edge_number.get(prefer_edge, -1) if prefer_edge
                              else -1, self.junction_lo, self.junction_hi, self._junction_xy, self._junction_start)
+
+    def locate_all(self, points: np.ndarray, prefer_edges: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`locate` of N footprints at once: points (N, P, 2), ``prefer_edges`` one per footprint;
+        returns (N, P), (N, P, 2), (N, P), row ``n`` equal to ``locate(points[n], prefer_edges[n])``
+        (one compiled call, :func:`.locate_kernel.locate_footprints`)."""
+        from hbmp_bench.metrics.locate_kernel import locate_footprints
+
+        grid = self._grid
+        prefer = np.array([self._edge_number.get(e, -1) if e else -1 for e in prefer_edges], dtype=np.int64)
+        return locate_footprints(np.ascontiguousarray(points, dtype=float), prefer, grid.origin, grid.cell_m,
+                                 int(grid.shape[0]), int(grid.shape[1]), grid.items, grid.starts, self._bounds, self.a,
+                                 self.unit, self.seg_len, self.half_width, self.lane_index, self._segment_edge,
+                                 self.junction_lo, self.junction_hi, self._junction_xy, self._junction_start)
 
     def locate_reference(self, points: np.ndarray, prefer_edge: str = "") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`locate` in numpy (what the compiled form is tested against)."""

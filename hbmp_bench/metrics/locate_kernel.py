@@ -6,6 +6,9 @@ Its numpy form (:meth:`.geometry.LaneLocator.locate_reference`) is ~30 small arr
 their per-call overhead, not the arithmetic, was ~0.2 ms a step (about one raw SUMO step).
 :func:`locate_points` runs the same arithmetic as scalar loops, in the same order, so it gives the
 same lanes, directions and junction flags (the tests hold the two forms to equal arrays).
+:func:`locate_footprints` does it for the footprints of every vehicle of a step in one call, the grid
+query included (the world's batched detectors, :func:`.detectors.update_all`): per call the same
+candidates and arithmetic, so the same results as one :func:`locate_points` per vehicle.
 
 numba is imported here only; :meth:`.geometry.LaneLocator.locate` imports this module on first use.
 """
@@ -17,7 +20,7 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["locate_points"]
+__all__ = ["locate_footprints", "locate_points"]
 
 
 @njit(cache=True, nogil=True)
@@ -42,6 +45,20 @@ def locate_points(points, candidates, bounds, a, unit, seg_len, half_width, lane
         on a junction lane and on no normal lane.
     """
     P = points.shape[0]
+    lane = np.full(P, -1, np.int64)
+    direction = np.zeros((P, 2))
+    in_junction = np.zeros(P, np.bool_)
+    _locate_into(points, candidates, bounds, a, unit, seg_len, half_width, lane_index, seg_edge, prefer, junction_lo,
+                 junction_hi, junction_xy, junction_start, lane, direction, in_junction)
+    return lane, direction, in_junction
+
+
+@njit(cache=True, nogil=True)
+def _locate_into(points, candidates, bounds, a, unit, seg_len, half_width, lane_index, seg_edge, prefer,
+                 junction_lo, junction_hi, junction_xy, junction_start, lane, direction, in_junction):
+    """:func:`locate_points` writing into ``lane``, ``direction`` and ``in_junction`` (P rows each, as
+    initialised there)."""
+    P = points.shape[0]
     lo_x = hi_x = points[0, 0]
     lo_y = hi_y = points[0, 1]
     for p in range(1, P):
@@ -55,9 +72,6 @@ def locate_points(points, candidates, bounds, a, unit, seg_len, half_width, lane
         if bounds[c, 0] >= lo_x and bounds[c, 1] >= lo_y and bounds[c, 2] >= -hi_x and bounds[c, 3] >= -hi_y:
             near[m] = c
             m += 1
-    lane = np.full(P, -1, np.int64)
-    direction = np.zeros((P, 2))
-    in_junction = np.zeros(P, np.bool_)
     for p in range(P):
         px = points[p, 0]
         py = points[p, 1]
@@ -107,15 +121,76 @@ def locate_points(points, candidates, bounds, a, unit, seg_len, half_width, lane
                     inside = not inside
             if inside:
                 in_junction[p] = True
+
+
+
+@njit(cache=True, nogil=True)
+def _grid_candidates(points, origin, cell, nx, ny, items, starts):
+    """:meth:`.geometry.SegmentGrid.query` for the box of ``points`` (P, 2): the same indices, ascending."""
+    lo_x = hi_x = points[0, 0]
+    lo_y = hi_y = points[0, 1]
+    for p in range(1, points.shape[0]):
+        lo_x = min(lo_x, points[p, 0])
+        hi_x = max(hi_x, points[p, 0])
+        lo_y = min(lo_y, points[p, 1])
+        hi_y = max(hi_y, points[p, 1])
+    x0 = max(math.floor((lo_x - origin[0]) / cell), 0)
+    y0 = max(math.floor((lo_y - origin[1]) / cell), 0)
+    x1 = min(math.floor((hi_x - origin[0]) / cell), nx - 1)
+    y1 = min(math.floor((hi_y - origin[1]) / cell), ny - 1)
+    if x1 < x0 or y1 < y0:
+        return items[:0]
+    if x0 == x1 and y0 == y1:
+        return items[starts[x0 * ny + y0]:starts[x0 * ny + y0 + 1]]
+    count = 0
+    for cx in range(x0, x1 + 1):
+        count += starts[cx * ny + y1 + 1] - starts[cx * ny + y0]
+    out = np.empty(count, items.dtype)
+    m = 0
+    for cx in range(x0, x1 + 1):
+        for i in range(starts[cx * ny + y0], starts[cx * ny + y1 + 1]):
+            out[m] = items[i]
+            m += 1
+    return np.unique(out)
+
+
+@njit(cache=True, nogil=True)
+def locate_footprints(points, prefer, origin, cell, nx, ny, items, starts, bounds, a, unit, seg_len, half_width,
+                      lane_index, seg_edge, junction_lo, junction_hi, junction_xy, junction_start):
+    """:func:`locate_points` of N footprints in one call, each with its own grid query and preferred edge.
+
+    Args:
+        points: (N, P, 2) [m], footprint ``n`` at ``points[n]``.
+        prefer: (N,) the preferred edge number of each footprint (-1: none).
+        origin, cell, nx, ny, items, starts: the :class:`.geometry.SegmentGrid` of the segments.
+        bounds ... junction_start: as :func:`locate_points`.
+
+    Returns:
+        ``(lane (N, P), direction (N, P, 2), in_junction (N, P))``, row ``n`` equal to
+        :func:`locate_points` of footprint ``n`` with the grid's candidates for its box.
+    """
+    N, P = points.shape[0], points.shape[1]
+    lane = np.full((N, P), -1, np.int64)
+    direction = np.zeros((N, P, 2))
+    in_junction = np.zeros((N, P), np.bool_)
+    for n in range(N):
+        candidates = _grid_candidates(points[n], origin, cell, nx, ny, items, starts)
+        _locate_into(points[n], candidates, bounds, a, unit, seg_len, half_width, lane_index, seg_edge, prefer[n],
+                     junction_lo, junction_hi, junction_xy, junction_start, lane[n], direction[n], in_junction[n])
     return lane, direction, in_junction
 
 
 def compile_kernel() -> None:
-    """Compile :func:`locate_points` (or load it from numba's on-disk cache) for the argument types
-    :meth:`.geometry.LaneLocator.locate` passes, so that the first lookup of a timed run does not compile."""
+    """Compile :func:`locate_points` and :func:`locate_footprints` (or load them from numba's on-disk cache)
+    for the argument types :meth:`.geometry.LaneLocator.locate` and ``locate_all`` pass, so that the first
+    lookup of a timed run does not compile."""
     seg = np.array([[0.0, 0.0], [10.0, 0.0]])
     unit = np.array([[1.0, 0.0]])
     bounds = np.array([[10.0, 2.0, 0.0, 2.0]])
     locate_points(np.array([[1.0, 0.5], [2.0, -0.5]]), np.arange(1), bounds, seg[:1].copy(), unit, np.array([10.0]),
                   np.array([1.75]), np.zeros(1, np.int64), np.zeros(1, np.int64), 0, np.zeros((1, 2)),
                   np.ones((1, 2)), seg.copy(), np.array([0, 2], np.int64))
+    locate_footprints(np.array([[[1.0, 0.5], [2.0, -0.5]]]), np.zeros(1, np.int64), np.zeros(2), 16.0, 1, 1,
+                      np.zeros(1, np.int64), np.array([0, 1], np.int64), bounds, seg[:1].copy(), unit, np.array([10.0]),
+                      np.array([1.75]), np.zeros(1, np.int64), np.zeros(1, np.int64), np.zeros((1, 2)), np.ones((1, 2)),
+                      seg.copy(), np.array([0, 2], np.int64))
