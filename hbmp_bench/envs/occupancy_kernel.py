@@ -6,7 +6,11 @@ cells they fall in. Its numpy form (:func:`.observation.occupancy_grid_reference
 segments) temporaries for the projection, ~0.4 ms a decision (two raw SUMO steps; in the event
 fidelity a decision is one sim step). :func:`deformed_grid` runs the same arithmetic per point, in
 numpy's order (``np.linspace`` for the sample offsets, :meth:`.planning.frame.Path.frenet`'s nearest
-segment and its straight extension past both ends), so it marks the same cells (tested).
+segment and its straight extension past both ends), so it marks the same cells (tested). Per footprint it
+first keeps the window's segments that can be a sample's nearest (:func:`_candidate_segments`) and skips a
+footprint that can mark no cell (:func:`_marks_nothing`): bounds from the footprint's centre, with a margin far
+above float error, so the search finds the same nearest segment (half the time of the full search in dense
+Town03, where ~40 actors are within reach of every M_t).
 
 numba is imported here only; :func:`.observation.occupancy_grid` imports this module on first use (and
 this module imports nothing of ``envs``).
@@ -35,6 +39,69 @@ def _linspace_half(n):
     return out
 
 
+
+PRUNE_MARGIN_M = 1e-6
+"""Slack of the pruning bounds of :func:`_candidate_segments` and :func:`_marks_nothing` [m]: far above the
+float error of the distances (~1e-10 m on a town's coordinates), far below a cell."""
+
+
+@njit(cache=True, nogil=True)
+def _segment_distance(px, py, i, x0, y0, tx, ty, chord):
+    """Distance [m] from (px, py) to segment ``i`` of the centreline (clamped to its ends)."""
+    dx = px - x0[i]
+    dy = py - y0[i]
+    along = dx * tx[i] + dy * ty[i]
+    cross = tx[i] * dy - ty[i] * dx
+    cc = along if along > 0.0 else 0.0
+    cc = cc if cc < chord[i] else chord[i]
+    return math.hypot(along - cc, cross)
+
+
+@njit(cache=True, nogil=True)
+def _candidate_segments(cx, cy, radius, i0, i1, x0, y0, tx, ty, chord, kept):
+    """The segments of the window ``i0..i1`` that can be the nearest one of a point within ``radius`` [m]
+    of (cx, cy) (a footprint's samples around its centre), ascending into ``kept``; returns their count.
+
+    A point p with ``|p - c| <= radius`` is within ``D_min + radius`` of its nearest segment and at least
+    ``D_i - radius`` from segment ``i`` (``D``: distances from c; a distance to a segment is 1-Lipschitz),
+    so a segment with ``D_i > D_min + 2 radius`` (plus :data:`PRUNE_MARGIN_M`) is never its nearest: the
+    search over the rest finds the same first minimum."""
+    d_min = np.inf
+    for i in range(i0, i1 + 1):
+        d_min = min(d_min, _segment_distance(cx, cy, i, x0, y0, tx, ty, chord))
+    limit = d_min + 2.0 * radius + PRUNE_MARGIN_M
+    m = 0
+    for i in range(i0, i1 + 1):
+        if _segment_distance(cx, cy, i, x0, y0, tx, ty, chord) <= limit:
+            kept[m] = i
+            m += 1
+    return m
+
+
+@njit(cache=True, nogil=True)
+def _marks_nothing(kept, m, nseg, cx, cy, radius, x0, y0, tx, ty, chord, ps, s_ego, rows, cell_long, back_m,
+                   half_width):
+    """True when no sample within ``radius`` [m] of (cx, cy) can mark a cell: every candidate segment is an
+    inner one (neither end of the centreline, whose straight extension projects past it), and either all
+    their rows lie outside the grid (the row is monotone in the position along a segment) or every sample
+    is farther than ``half_width`` from them (on an inner segment ``|e|`` is the distance)."""
+    for q in range(m):
+        if kept[q] == 0 or kept[q] == nseg - 1:
+            return False
+    inside_rows = False
+    for q in range(m):
+        i = kept[q]
+        first = math.floor((ps[i] + 0.0 - s_ego + back_m) / cell_long)
+        last = math.floor((ps[i] + chord[i] - s_ego + back_m) / cell_long)
+        if last >= 0 and first < rows:
+            inside_rows = True
+    if not inside_rows:
+        return True
+    d_min = np.inf
+    for q in range(m):
+        d_min = min(d_min, _segment_distance(cx, cy, kept[q], x0, y0, tx, ty, chord))
+    return d_min - radius > half_width + PRUNE_MARGIN_M
+
 @njit(cache=True, nogil=True)
 def deformed_grid(ego_x, ego_y, xs, ys, yaws, lengths, widths, n_long, n_lat, ps, x0, y0, tx, ty, chord, heading,
                   kappa, dh, dk, rows, cols, cell_long, cell_lat, back_m, ahead_m, half_width):
@@ -55,9 +122,15 @@ def deformed_grid(ego_x, ego_y, xs, ys, yaws, lengths, widths, n_long, n_lat, ps
     i1 = segment_of(ps, s_ego + (ahead_m + 10.0))
     u = _linspace_half(n_long)
     v = _linspace_half(n_lat)
+    kept = np.empty(i1 - i0 + 1, np.int64)
     for k in range(len(xs)):
         c = math.cos(yaws[k])
         s = math.sin(yaws[k])
+        m = _candidate_segments(xs[k], ys[k], 0.5 * math.hypot(lengths[k], widths[k]), i0, i1, x0, y0, tx, ty, chord,
+                                kept)
+        if _marks_nothing(kept, m, nseg, xs[k], ys[k], 0.5 * math.hypot(lengths[k], widths[k]), x0, y0, tx, ty, chord,
+                          ps, s_ego, rows, cell_long, back_m, half_width):
+            continue
         for a in range(n_long):
             lon = u[a] * lengths[k]
             for b in range(n_lat):
@@ -67,7 +140,8 @@ def deformed_grid(ego_x, ego_y, xs, ys, yaws, lengths, widths, n_long, n_lat, ps
                 best_d2 = np.inf
                 bi = i0
                 b_along = b_c = b_cross = 0.0
-                for i in range(i0, i1 + 1):  # Path.frenet's windowed nearest segment
+                for q in range(m):  # Path.frenet's windowed nearest segment, among those that can be it
+                    i = kept[q]
                     dx = px - x0[i]
                     dy = py - y0[i]
                     along = dx * tx[i] + dy * ty[i]

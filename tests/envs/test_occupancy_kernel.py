@@ -31,3 +31,29 @@ def test_compiled_grid_equals_the_numpy_grid(cfg):
         assert grid.dtype == np.float32 and grid.shape == (1, cfg.rows, cfg.cols)
         marked += grid.any()
     assert marked >= 30
+
+
+def test_pruned_search_marks_the_same_cells_beside_the_grid_edges():
+    """The compiled grid skips segments that cannot be a sample's nearest and footprints that cannot mark a
+    cell (``occupancy_kernel._candidate_segments`` / ``_marks_nothing``): footprints straddling the grid's
+    side and end edges, on curved lanes, still mark what the numpy form marks."""
+    cfg = ObservationConfig()
+    net = road_network("Town03")
+    rng = np.random.default_rng(11)
+    lanes = sorted(net.lanes)
+    for _ in range(80):
+        lane = lanes[rng.integers(len(lanes))]
+        edges = tuple(e for _, e in net.lane_next.get(lane, ()))[:1]
+        path = followed_path(net, lane, edges, cfg.back_m, cfg.ahead_m)
+        at = rng.integers(len(path.xy))
+        ego_xy = path.xy[at]
+        k = 40
+        base = path.xy[rng.integers(len(path.xy), size=k)]
+        normal = rng.normal(0.0, 1.0, (k, 2))
+        normal /= np.hypot(*normal.T)[:, None]
+        xy = base + normal * rng.uniform(cfg.half_width_m - 3.0, cfg.half_width_m + 3.0, (k, 1))
+        yaw = rng.uniform(-np.pi, np.pi, k)
+        length = rng.uniform(0.6, 12.0, k)
+        width = rng.uniform(0.6, 2.6, k)
+        args = (cfg, ego_xy, 0.0, path, xy, yaw, length, width)
+        np.testing.assert_array_equal(occupancy_grid(*args), occupancy_grid_reference(*args))
