@@ -123,6 +123,35 @@ class LearnedAgent:
         # the Gaussian mean is unbounded; training clips controls to [-1, 1] in the env, so does this
         return np.clip(out.cpu().numpy(), -1.0, 1.0).astype(np.float32)
 
+    def act_batch(self, observations: dict[str, dict[str, Any]], infos: dict[str, dict[str, Any]]) -> dict[str, Any]:
+        """:meth:`act` for many vehicles in one forward pass: ``observations`` / ``infos`` keyed by vehicle
+        (every vehicle of a scene that decides now, ``agents.scene.SceneAgent``); returns their actions by
+        the same keys (the same as one :meth:`act` each, up to the last float bit of a batched matmul)."""
+        from tensordict import TensorDict
+
+        torch, names = self._torch, list(observations)
+        if not names:
+            return {}
+        groups = {}
+        for key in self._groups:
+            rows = [infos[n]["action_mask"] if key == "action_mask" and key not in observations[n]
+                    else observations[n][key] for n in names]
+            groups[key] = torch.as_tensor(np.stack([np.asarray(r, dtype=np.float32) for r in rows]), device=self.device)
+        batch = TensorDict(groups, batch_size=[len(names)], device=self.device)
+        with torch.inference_mode():
+            if not self.discrete:
+                out = np.clip(self.actor(batch).cpu().numpy(), -1.0, 1.0).astype(np.float32)
+                return {n: out[k] for k, n in enumerate(names)}
+            distribution = self.actor.distribution
+            distribution.update(self.actor.distribution_input(batch))
+            probabilities = distribution.probs.cpu().numpy()
+        actions = {}
+        for k, n in enumerate(names):
+            mask = np.asarray(infos[n].get("action_mask", np.ones(probabilities.shape[1])), dtype=bool)
+            actions[n] = int(np.argmax(np.where(mask, probabilities[k], -1.0)) if mask.any()
+                             else np.argmax(probabilities[k]))
+        return actions
+
     def behavior_probabilities(self, observation: dict[str, Any], info: dict[str, Any]) -> np.ndarray:
         """(5,) the policy's behavior probabilities (behavior policies only): its own distribution's, so a
         policy trained at a sampling temperature reports the probabilities it was trained with."""

@@ -18,7 +18,7 @@ from hbmp_bench.envs.observation import ObservationConfig
 from hbmp_bench.planning.behaviors import BehaviorConfig
 from hbmp_bench.maps import available_maps
 from hbmp_bench.scenarios import (SCENARIO_TYPES, Episode, Traffic, check_task, check_town, get_suite, sample_episode,
-                                  suite_episodes, traffic_for)
+                                  suite_episodes, traffic_for, with_agents)
 from hbmp_bench.errors import ConfigError
 
 REWARDS = ("dense", "sparse")
@@ -40,11 +40,15 @@ class ScenarioConfig:
         random_goals: ignore the suite's list and draw a fresh start and goal every reset (training).
         density: override the background traffic (``empty``, ``corl``, ``regular``, ``dense``);
             None: each episode's own.
+        agents: goal-directed vehicles per episode, the ego included (``ego``, ``ego1`` ...: each its own
+            start, goal and route, drawn from the episode's seed, ``scenarios.suites.with_agents``); None:
+            the suite's (``Suite.agents``: 1, or 8 in ``multi``).
 
     Raises:
         UnknownNameError: an unknown town, task, suite or density (naming the valid ones).
         ConfigError: ``episode_index`` outside the list, or given with ``random_goals`` (a ValueError); a
-            scenario type the town cannot host (naming those that can) or with ``random_goals``.
+            scenario type the town cannot host (naming those that can) or with ``random_goals``; ``agents``
+            below 1, or above 1 with a scenario type.
     """
 
     town: str = "Town01"
@@ -53,11 +57,17 @@ class ScenarioConfig:
     episode_index: int | None = None
     random_goals: bool = False
     density: str | None = None
+    agents: int | None = None
 
     def __post_init__(self):
         check_town(self.town)
         check_task(self.task)
         object.__setattr__(self, "suite", get_suite(self.suite).name)
+        if self.agents is not None and (isinstance(self.agents, bool) or not isinstance(self.agents, (int, np.integer))
+                                        or self.agents < 1):
+            raise ConfigError(f"agents must be an int >= 1 or None, got {self.agents!r}")
+        if self.task in SCENARIO_TYPES and self.goal_agents > 1:
+            raise ConfigError(f"{self.task} is a scenario type: its episodes have one goal-directed vehicle")
         if self.density is not None:
             traffic_for(self.town, self.task, self.density)
         if self.task in SCENARIO_TYPES:
@@ -73,6 +83,16 @@ class ScenarioConfig:
             if not 0 <= self.episode_index < len(self.episodes):
                 raise ConfigError(f"episode_index must be in [0, {len(self.episodes)}), got {self.episode_index}")
 
+    @property
+    def goal_agents(self) -> int:
+        """Goal-directed vehicles per episode, the ego included (``agents``, else the suite's)."""
+        return int(self.agents) if self.agents is not None else get_suite(self.suite).agents
+
+    def _with_agents(self, episode: Episode) -> Episode:
+        if len(episode.agents) == self.goal_agents:
+            return episode
+        return with_agents(episode, self.goal_agents, get_suite(self.suite))
+
     @cached_property
     def traffic(self) -> Traffic | None:
         """The traffic ``density`` sets for every episode (None: each episode's own)."""
@@ -85,8 +105,11 @@ class ScenarioConfig:
             return ()
         episodes = suite_episodes(self.suite, self.town, self.task)
         if self.traffic is not None:
-            episodes = tuple(dataclasses.replace(e, traffic=self.traffic) for e in episodes)
-        return episodes
+            episodes = tuple(dataclasses.replace(e, traffic=self.traffic,
+                                                 others=tuple(dataclasses.replace(o, traffic=self.traffic)
+                                                              for o in e.others))
+                             for e in episodes)
+        return tuple(self._with_agents(e) for e in episodes)
 
     @property
     def least_vehicles(self) -> int:
@@ -103,8 +126,9 @@ class ScenarioConfig:
             traffic = self.traffic if self.traffic is not None else traffic_for(self.town, self.task, None)
             seed = int(rng.integers(2**31))
             pose_task = "Navigation" if self.task == "NavigationDynamic" else self.task
-            return sample_episode(self.town, pose_task, np.random.default_rng(seed), suite=get_suite(self.suite),
-                                  index=0, seed=seed, traffic=traffic)
+            episode = sample_episode(self.town, pose_task, np.random.default_rng(seed), suite=get_suite(self.suite),
+                                     index=0, seed=seed, traffic=traffic)
+            return self._with_agents(episode)
         index = self.episode_index if episode_index is None else episode_index
         if index is None:
             index = int(rng.integers(len(self.episodes)))
@@ -181,6 +205,7 @@ class WorldConfig:
 def env_configs(*, town: str = ScenarioConfig.town, task: str = ScenarioConfig.task,
                 suite: str = ScenarioConfig.suite, episode_index: int | None = ScenarioConfig.episode_index,
                 random_goals: bool = ScenarioConfig.random_goals, density: str | None = ScenarioConfig.density,
+                agents: int | None = ScenarioConfig.agents,
                 fidelity: str | None = WorldConfig.fidelity, ego_driver: str = WorldConfig.ego_driver,
                 background_fidelity: str = WorldConfig.background_fidelity, reward: str = WorldConfig.reward,
                 decision_period_s: float = WorldConfig.decision_period_s, observation: str | None = None,
@@ -189,7 +214,7 @@ def env_configs(*, town: str = ScenarioConfig.town, task: str = ScenarioConfig.t
     """The (scenario, world) configs of the keyword form of every env (defaults: the configs' own).
 
     Args:
-        town, task, suite, episode_index, random_goals, density: :class:`ScenarioConfig`.
+        town, task, suite, episode_index, random_goals, density, agents: :class:`ScenarioConfig`.
         fidelity, ego_driver, background_fidelity, reward, decision_period_s, privileged:
             :class:`WorldConfig` (``fidelity`` is the ego's; None: the default).
         observation: ``deformed`` or ``vehicle_centric`` M_t (:attr:`ObservationConfig.kind`).
@@ -209,7 +234,7 @@ def env_configs(*, town: str = ScenarioConfig.town, task: str = ScenarioConfig.t
     if fidelity is None:
         fidelity = WorldConfig.fidelity
     scenario = ScenarioConfig(town=town, task=task, suite=suite, episode_index=episode_index,
-                              random_goals=random_goals, density=density)
+                              random_goals=random_goals, density=density, agents=agents)
     world = WorldConfig(fidelity=fidelity, ego_driver=ego_driver, background_fidelity=background_fidelity,
                         reward=reward, decision_period_s=decision_period_s, observation=observation_config,
                         privileged=privileged)

@@ -105,7 +105,7 @@ from hbmp_bench.envs.actions import CONTROL_SPACE, check_action
 from hbmp_bench.envs.config import ScenarioConfig, WorldConfig, env_configs
 from hbmp_bench.envs.ego_view import EgoView
 from hbmp_bench.envs.observation import observation_space
-from hbmp_bench.envs.world import EGO_ID, DrivingWorld
+from hbmp_bench.envs.world import EGO_ID, DrivingWorld, goal_vehicle_ids
 from hbmp_bench.planning.behaviors import BEHAVIORS
 from hbmp_bench.scenarios import check_salt
 from hbmp_bench.errors import ConfigError
@@ -189,7 +189,9 @@ class TrafficParallelEnv(ParallelEnv):
         self._cycles = 0
         self.scenario, self.config = build_configs(scenario, world, options)
         self.n_controlled = _controlled_count(controlled, self.scenario.least_vehicles)
-        self.possible_agents = [EGO_ID, *(f"bg{k}" for k in range(self.n_controlled))]
+        self.goal_agents = list(goal_vehicle_ids(self.scenario.goal_agents))
+        """The goal-directed agents: ``ego`` and, with ``agents`` > 1 (or a multi-agent suite), ``ego1`` ..."""
+        self.possible_agents = [*self.goal_agents, *(f"bg{k}" for k in range(self.n_controlled))]
         self.agents: list[str] = []
         behavior_obs = observation_space(self.config.observation)
         if self.config.ego_driver == "control":
@@ -200,8 +202,9 @@ class TrafficParallelEnv(ParallelEnv):
         else:
             ego_obs, ego_action = behavior_obs, spaces.Discrete(len(BEHAVIORS))
         background_action = spaces.Discrete(len(BEHAVIORS))
-        self._observation_spaces = {a: ego_obs if a == EGO_ID else behavior_obs for a in self.possible_agents}
-        self._action_spaces = {a: ego_action if a == EGO_ID else background_action for a in self.possible_agents}
+        goal = set(self.goal_agents)
+        self._observation_spaces = {a: ego_obs if a in goal else behavior_obs for a in self.possible_agents}
+        self._action_spaces = {a: ego_action if a in goal else background_action for a in self.possible_agents}
         self._renderer = None
         self._frames: list[np.ndarray] = []
         self._last_behavior = ""
@@ -326,6 +329,13 @@ class TrafficParallelEnv(ParallelEnv):
         if self._world is None or self._world.episode is None:
             return None
         return self._world.record(agent)
+
+    def records(self, agent: str = "") -> list:
+        """Every goal-directed agent's episode record so far (``ego`` first; final once its episode has
+        ended, as in its last ``info["hbmp_record"]``); [] before the first reset."""
+        if self._world is None or self._world.episode is None:
+            return []
+        return self._world.records(agent)
 
     def close(self) -> None:
         if self._world is not None:

@@ -1,6 +1,12 @@
 """The driving world: one SUMO episode with the ego and the background agents, each a
 :class:`~hbmp_bench.envs.vehicle.ControlledVehicle`, among SUMO's own traffic and pedestrians.
 
+Goal-directed vehicles: the ego and, in a multi-agent episode (``Episode.others``), ``ego1``,
+``ego2`` ...: each with its own start, goal and route (:class:`~hbmp_bench.envs.vehicle.GoalRoute`),
+infraction detector, end rules and episode record (:meth:`DrivingWorld.record`). The scene runs until
+every goal-directed vehicle's episode has ended; one that ends earlier leaves the simulation (it
+would stand in the others' way at its goal). A single-ego episode is the case of one.
+
 The world owns the simulation's lifecycle, the spawning of traffic and the one step loop every
 env runs (the single-ego env is this loop with no background agent)::
 
@@ -8,15 +14,16 @@ env runs (the single-ego env is this loop with no background agent)::
     loop: every vehicle running a behavior plans one control period (vehicle.wants_step);
           if any behavior has ended -> return
           one SUMO step for all; detectors of every vehicle; on_substep()
-          if the ego's episode ended or a background vehicle's did -> return
+          if a goal-directed vehicle's episode ended or a background vehicle's did -> return
 
 A vehicle whose behavior is still running at the return needs no decision; its committed control
-period runs in the next SUMO step. A vehicle's last step (its episode ended, or the ego's did) pays
+period runs in the next SUMO step. A vehicle's last step (its episode ended, or the scene's did) pays
 the r_k of the behavior it was cut in.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Any
 
@@ -26,7 +33,8 @@ from hbmp_bench import __version__
 from hbmp_bench.envs.config import WorldConfig
 from hbmp_bench.envs.drivers import make_driver
 from hbmp_bench.envs.observation import ObservationBuilder
-from hbmp_bench.envs.vehicle import ControlledVehicle, EndRules, GoalRoute, LoopRoute, NOWHERE, Shared, continuation
+from hbmp_bench.envs.vehicle import (ControlledVehicle, EndRules, GoalRoute, LoopRoute, NOWHERE, Shared,
+                                     after_sim_steps, continuation)
 from hbmp_bench.maps import net_path
 from hbmp_bench.metrics.detectors import InfractionDetector, StepEvents
 from hbmp_bench.metrics.episode import EpisodeId, add_events
@@ -34,12 +42,22 @@ from hbmp_bench.metrics.geometry import LaneLocator
 from hbmp_bench.envs.registration import RECORD_KEY
 from hbmp_bench.metrics.records import DECISION_CAP, EpisodeRecord
 from hbmp_bench.scenarios import Episode, episode_entropy, road_network
-from hbmp_bench.scenarios.scenario_types import Script, script_for
+from hbmp_bench.scenarios.scenario_types import SCRIPT_ACTOR_PREFIX, Script, script_for
 from hbmp_bench.sim.sumo import BACKGROUND_TYPE, EGO_TYPE, SumoSim, VehicleType
 
 EGO_ID = "ego"
+
+
+def goal_vehicle_ids(count: int) -> tuple[str, ...]:
+    """The ids of ``count`` goal-directed vehicles: ``ego``, ``ego1``, ``ego2`` ..."""
+    return (EGO_ID, *(f"{EGO_ID}{k}" for k in range(1, count)))
 LIGHT_STREAM = 0x4C49474854
 """Last entropy word of the light phases' stream in a salted episode (apart from the traffic's)."""
+GRIDLOCK_WAIT_S = 30.0
+"""A vehicle SUMO drives that has stood this long inside a junction leaves the simulation [s]
+(``SumoSim.clear_junction_blockers``: a gridlock with the agents' vehicles), checked every
+:data:`GRIDLOCK_CHECK_STEPS` steps."""
+GRIDLOCK_CHECK_STEPS = 10
 CONTROLLED_SPACING_M = 12.0
 """Least gap between two controlled vehicles inserted on the same lane [m] (SUMO delays an
 insertion onto an occupied place; a controlled vehicle must exist from the first step)."""
@@ -59,14 +77,21 @@ class DrivingWorld:
         self.locator = LaneLocator(self.net)
         self.observer = ObservationBuilder(self.net, config.observation)
         self.sim = SumoSim(net_path(town), step_length=config.step_length_s)
-        self.ego_driver = self.make_driver(EGO_ID, EGO_TYPE, "control" if config.ego_driver == "control"
-                                           else config.fidelity)
-        """The ego's driver (kept across episodes; a background agent gets a new one each episode)."""
+        self.goal_driver = "control" if config.ego_driver == "control" else config.fidelity
+        """The driver kind of every goal-directed vehicle (:data:`~hbmp_bench.envs.drivers.DRIVERS`)."""
+        self.ego_driver = self.make_driver(EGO_ID, EGO_TYPE, self.goal_driver)
+        """The ego's driver (kept across episodes; every other vehicle gets a new one each episode)."""
         self.episode: Episode | None = None
         self.ego: ControlledVehicle | None = None
         self.vehicles: dict[str, ControlledVehicle] = {}
         self.live: list[str] = []
         """The vehicles whose episode runs, ego first."""
+        self.goal_ids: tuple[str, ...] = ()
+        """The goal-directed vehicles of the episode: ``ego`` and ``ego1`` ... (``Episode.others``)."""
+        self._ended_at: dict[str, float] = {}
+        self._agent_contacts: dict[str, set[str]] = {}
+        self.cleared = 0
+        """Vehicles SUMO drove that the episode took out of a gridlock (:data:`GRIDLOCK_WAIT_S`)."""
         self._running: set[str] = set()
         self._committed: set[str] = set()
         self.spawned: tuple[int, int] = (0, 0)
@@ -105,25 +130,30 @@ class DrivingWorld:
         if salt:
             lights = np.random.default_rng([*entropy, LIGHT_STREAM])
             self.sim.shift_light_phases({tls: float(lights.random()) for tls in sorted(self.sim.light_ids())})
-        start = self.net.lane(episode.start_lane)
-        self.sim.add_vehicle(EGO_ID, episode.route + continuation(self.net, episode.route[-1]), lane_index=start.index,
-                             pos=episode.start_pos, speed=0.0, vtype=EGO_TYPE)
-        self.sim.hand_over(EGO_ID)
-        self.sim.set_speed(EGO_ID, 0.0)
-        routes = self._spawn_traffic(rng, start.edge, controlled)
+        self.goal_ids = goal_vehicle_ids(len(episode.agents))
+        for name, leg in zip(self.goal_ids, episode.agents):
+            start = self.net.lane(leg.start_lane)
+            self.sim.add_vehicle(name, leg.route + continuation(self.net, leg.route[-1]), lane_index=start.index,
+                                 pos=leg.start_pos, speed=0.0, vtype=EGO_TYPE)
+            self.sim.hand_over(name)
+            self.sim.set_speed(name, 0.0)
+        routes = self._spawn_traffic(rng, {self.net.lane(leg.start_lane).edge for leg in episode.agents}, controlled)
         self.script = script_for(episode, self.net, entropy)
         if self.script is not None:
             self.script.start(self.sim)
         self.sim.step()
         shared = Shared(self.sim, self.net, self.locator, self.observer, self.config.reward == "dense", self.long_route)
-        goal_xy = self.net.position(episode.goal_lane, episode.goal_pos)
-        if self.sim.vehicle_state(EGO_ID) is None:
-            raise RuntimeError(f"SUMO did not insert the ego for {episode.key}")
-        self.ego = ControlledVehicle(
-            EGO_ID, EGO_TYPE, self.ego_driver, shared, GoalRoute(episode, self.config.fidelity, self.config.privileged),
-            InfractionDetector(self.locator, goal_xy, episode.success_radius_m, episode.timeout_s),
-            EndRules(on_collision=episode.end_on_collision, on_violation=episode.end_on_violation))
-        self.vehicles = {EGO_ID: self.ego}
+        self.vehicles = {}
+        for name, leg in zip(self.goal_ids, episode.agents):
+            if self.sim.vehicle_state(name) is None:
+                raise RuntimeError(f"SUMO did not insert the goal-directed vehicle {name} of {episode.key}")
+            driver = self.ego_driver if name == EGO_ID else self.make_driver(name, EGO_TYPE, self.goal_driver)
+            self.vehicles[name] = ControlledVehicle(
+                name, EGO_TYPE, driver, shared, GoalRoute(leg, self.config.fidelity, self.config.privileged),
+                InfractionDetector(self.locator, self.net.position(leg.goal_lane, leg.goal_pos), leg.success_radius_m,
+                                   leg.timeout_s),
+                EndRules(on_collision=leg.end_on_collision, on_violation=leg.end_on_violation))
+        self.ego = self.vehicles[EGO_ID]
         for k, (name, route) in enumerate(routes.items()):
             self.vehicles[name] = ControlledVehicle(
                 name, BACKGROUND_TYPE, self.make_driver(name, BACKGROUND_TYPE, self.config.background_fidelity),
@@ -131,6 +161,10 @@ class DrivingWorld:
                 InfractionDetector(self.locator, NOWHERE, 0.0, np.inf), EndRules(on_collision=True, on_violation=False))
         self.live = list(self.vehicles)
         self._running, self._committed = set(), set()
+        self._ended_at, self._agent_contacts = {}, {name: set() for name in self.goal_ids}
+        self._steps, self.cleared = 0, 0
+        agents = frozenset(self.vehicles)
+        self._kept = lambda vehicle_id: vehicle_id in agents or vehicle_id.startswith(SCRIPT_ACTOR_PREFIX)
         observations, infos = {}, {}
         for name in self.live:
             observations[name], _, infos[name] = self._outcome(name, StepEvents(), behavior_ended=False)
@@ -156,11 +190,12 @@ class DrivingWorld:
             total += dist[target]
         return route
 
-    def _spawn_traffic(self, rng: np.random.Generator, ego_edge: str, controlled: int) -> dict[str, tuple[str, ...]]:
-        """Insert the episode's background vehicles and pedestrians; returns the routes of the
-        controlled ones (handed over, tracked and standing)."""
+    def _spawn_traffic(self, rng: np.random.Generator, start_edges: set[str],
+                       controlled: int) -> dict[str, tuple[str, ...]]:
+        """Insert the episode's background vehicles and pedestrians, none on the goal-directed vehicles'
+        ``start_edges``; returns the routes of the controlled ones (handed over, tracked and standing)."""
         traffic = self.episode.traffic
-        edges = [e for e in self.net.drivable_edges if e != ego_edge and self.net.edge_length[e] > 15.0
+        edges = [e for e in self.net.drivable_edges if e not in start_edges and self.net.edge_length[e] > 15.0
                  and self.net.successors(e)]
         taken: dict[str, list[float]] = {}
         routes: dict[str, tuple[str, ...]] = {}
@@ -225,27 +260,40 @@ class DrivingWorld:
             self.sim.step()
             if self.script is not None:
                 self.script.tick(self.sim, self.sim.vehicle_state(EGO_ID))
+            self._steps += 1
+            if self._steps % GRIDLOCK_CHECK_STEPS == 0:
+                self.cleared += len(self.sim.clear_junction_blockers(self._kept, GRIDLOCK_WAIT_S))
             snapshot = self.sim.snapshot()
             self._committed.clear()
-            for name in self.live:
-                add_events(events[name], self.vehicles[name].after_sim_step(snapshot))
+            for name, step_events in zip(self.live, after_sim_steps([self.vehicles[n] for n in self.live], snapshot)):
+                add_events(events[name], step_events)
+                if step_events.collided_with and name in self._agent_contacts:
+                    self._agent_contacts[name].update(a for a in step_events.collided_with if a in self._agent_contacts)
             if on_substep is not None:
                 on_substep()
             if any(self.vehicles[name].end_reason for name in self.live):
                 break
-        if last and not self.ego.end_reason:
-            self.ego.end_reason = DECISION_CAP
+        if last:
+            for name in self.goal_ids:
+                if not self.vehicles[name].end_reason:
+                    self.vehicles[name].end_reason = DECISION_CAP
         return self._collect(events, ended)
+
+    @property
+    def over(self) -> bool:
+        """Every goal-directed vehicle's episode has ended (the scene's end)."""
+        return all(self.vehicles[name].end_reason for name in self.goal_ids)
 
     def _outcome(self, name: str, events: StepEvents, behavior_ended: bool) -> tuple[dict, float, dict]:
         obs, reward, info = self.vehicles[name].outcome(events, behavior_ended)
-        if name == EGO_ID:
-            info["route_completion"] = self.route_completion
+        if name in self._agent_contacts:
+            info["route_completion"] = self.vehicles[name].route.score.completion(
+                self.vehicles[name].end_reason == "goal")
             info["episode_key"] = self.episode.key
         return obs, reward, info
 
     def _collect(self, events: dict[str, StepEvents], ended: set[str]):
-        over = bool(self.ego.end_reason)
+        over = self.over
         obs, rewards, terms, truncs, infos = {}, {}, {}, {}, {}
         for name in self.live:
             vehicle = self.vehicles[name]
@@ -253,16 +301,18 @@ class DrivingWorld:
             truncs[name] = vehicle.truncated or (over and not vehicle.terminated)
             last = terms[name] or truncs[name]
             obs[name], rewards[name], infos[name] = self._outcome(name, events[name], name in ended or last)
-        if over:
-            infos[EGO_ID][RECORD_KEY] = self.record().to_dict()
         for name in list(self.live):
             infos[name]["decision_required"] = self.needs_decision(name) and not (terms[name] or truncs[name])
             if terms[name] or truncs[name]:
                 self.live.remove(name)
                 self._running.discard(name)
                 self._committed.discard(name)
-                if name != EGO_ID and terms[name]:
-                    self.sim.remove_vehicle(name)
+                goal_directed = name in self._agent_contacts
+                if goal_directed:
+                    self._ended_at[name] = self.sim.time
+                    infos[name][RECORD_KEY] = self.record(vehicle=name).to_dict()
+                if (terms[name] and not goal_directed) or (goal_directed and not over):
+                    self.sim.remove_vehicle(name)  # a finished vehicle leaves the scene that goes on
         return obs, rewards, terms, truncs, infos
 
     # ---------------------------------------------------------------- record
@@ -270,13 +320,27 @@ class DrivingWorld:
     def route_completion(self) -> float:
         return self.ego.route.score.completion(self.ego.end_reason == "goal")
 
-    def record(self, agent: str = "") -> EpisodeRecord:
-        """The ego's episode record so far (final once the episode has ended)."""
-        ep, ego = self.episode, self.ego
-        return ego.route.score.record(
-            EpisodeId(ep.suite, ep.town, ep.task, ep.index, ep.seed, self.config.fidelity, ep.route_length_m),
-            agent=agent, package_version=__version__, totals=ego.detector.totals, success=ego.end_reason == "goal",
-            end_reason=ego.end_reason, duration_s=self.sim.time, decisions=ego.decisions, traffic=self.spawned)
+    def record(self, agent: str = "", vehicle: str = EGO_ID) -> EpisodeRecord:
+        """The episode record of the goal-directed ``vehicle`` so far (final once its episode has ended);
+        in a multi-agent episode it names the vehicle and the other goal-directed vehicles it collided with
+        (``EpisodeRecord.vehicle``, ``agent_collisions``), in a single-ego episode both stay empty."""
+        if vehicle not in self._agent_contacts:
+            raise ValueError(f"{vehicle!r} is not a goal-directed vehicle of the episode; those are {list(self.goal_ids)}")
+        v = self.vehicles[vehicle]
+        leg, ep = v.route.episode, self.episode
+        record = v.route.score.record(
+            EpisodeId(ep.suite, ep.town, ep.task, ep.index, ep.seed, self.config.fidelity, leg.route_length_m),
+            agent=agent, package_version=__version__, totals=v.detector.totals, success=v.end_reason == "goal",
+            end_reason=v.end_reason, duration_s=self._ended_at.get(vehicle, self.sim.time), decisions=v.decisions,
+            traffic=self.spawned)
+        if len(self.goal_ids) == 1:
+            return record
+        return dataclasses.replace(record, vehicle=vehicle,
+                                   agent_collisions=" ".join(sorted(self._agent_contacts[vehicle])))
+
+    def records(self, agent: str = "") -> list[EpisodeRecord]:
+        """Every goal-directed vehicle's record so far (:meth:`record`), ``ego`` first."""
+        return [self.record(agent, name) for name in self.goal_ids]
 
     def close(self) -> None:
         self.sim.close()

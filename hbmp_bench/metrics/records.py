@@ -83,6 +83,11 @@ class EpisodeRecord:
     asked for). ``peak_lateral_accel_mps2``: the largest speed × yaw rate over any 1 s of the episode [m/s²]
     (:class:`~hbmp_bench.metrics.episode.LateralAcceleration`). -1: not recorded (an error record, the
     highway-env transfer, a record older than the field).
+
+    A multi-agent episode (``Suite.agents`` > 1) has one record per goal-directed vehicle: ``vehicle`` names it
+    (``ego``, ``ego1`` ...) and ``agent_collisions`` lists, space-separated, the other goal-directed vehicles of
+    the scene it collided with (their collisions are also in ``collision_vehicle``); a pair that collided is in
+    both records, so pairs are counted once by :func:`agent_collision_pairs`. Both are "" in a single-ego episode.
     """
 
     suite: str
@@ -112,6 +117,8 @@ class EpisodeRecord:
     traffic_vehicles: int = -1
     traffic_pedestrians: int = -1
     peak_lateral_accel_mps2: float = -1.0
+    vehicle: str = ""
+    agent_collisions: str = ""
 
     @property
     def collisions(self) -> int:
@@ -124,6 +131,18 @@ class EpisodeRecord:
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+
+def agent_collision_pairs(records) -> set[tuple[str, str, str, str, int, str, str]]:
+    """The pairs of goal-directed vehicles that collided in multi-agent episodes, each once: (suite, town,
+    task, agent, episode, first vehicle, second vehicle), from the records' ``agent_collisions`` (a pair is
+    in both its vehicles' records, and in either alone when the other's record is missing)."""
+    pairs = set()
+    for r in records:
+        for other in r.agent_collisions.split():
+            first, second = sorted((r.vehicle, other))
+            pairs.add((r.suite, r.town, r.task, r.agent, r.episode, first, second))
+    return pairs
 
 
 def driving_score(route_completion: float, counts: dict[str, int], off_route_fraction: float = 0.0) -> float:

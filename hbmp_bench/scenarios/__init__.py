@@ -18,6 +18,7 @@ from hbmp_bench.scenarios.suites import (
     selection_size,
     suite_episodes,
     traffic_for,
+    with_agents,
 )
 
 __all__ = [
@@ -43,4 +44,5 @@ __all__ = [
     "selection_size",
     "suite_episodes",
     "traffic_for",
+    "with_agents",
 ]

@@ -42,6 +42,10 @@ def stopping_room_m(speed_mps: float) -> float:
     return speed_mps * REACTION_S + speed_mps**2 / (2 * COMFORT_DECEL_MPS2)
 
 
+SCRIPT_ACTOR_PREFIX = "sc_"
+"""Every scripted actor's id begins so (the world never takes them out of a gridlock: the script owns them)."""
+
+
 class Script:
     """The scripted actors of one episode (see the module docstring).
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from dataclasses import fields as dataclass_fields
 
 TASKS: tuple[str, ...] = ("Straight", "OneTurn", "Navigation", "NavigationDynamic")
@@ -81,6 +81,10 @@ class Suite:
             rule made for drivers that do not stop at red lights (CoRL2017's, in CARLA 0.8, where a red
             light was no failure): without it a lawful driver meets its 10 km/h + 10 s only where the
             lights happen to be green, and the expert timed out in 5 of 25 Town02 Navigation dynamic episodes.
+        agents: goal-directed vehicles per episode, the ego included (1: a single-ego suite). With more, every
+            episode also holds ``agents - 1`` other goal-directed vehicles (``Episode.others``, drawn from the
+            episode's seed by ``scenarios.suites.with_agents``), each driven by the evaluated policy and scored
+            on its own record by the same rules.
     """
 
     name: str
@@ -96,8 +100,11 @@ class Suite:
     density: str | None = None
     description: str = ""
     timeout_waits_at_lights: bool = False
+    agents: int = 1
 
     def __post_init__(self):
+        if self.agents < 1:
+            raise ValueError(f"agents must be >= 1, got {self.agents}")
         if self.episodes_per_task <= 0:
             raise ValueError(f"episodes_per_task must be > 0, got {self.episodes_per_task}")
         if self.timeout_speed_kmh <= 0:
@@ -124,7 +131,7 @@ of the definition hash of a suite that holds scenario types, so that results of 
 it whenever a script changes. 2: streams of 6-12 cars at headways drawn per car (1.5-4 s: gaps to judge), a
 cut-in 2.5-5 m ahead that then brakes, a runner at 1.3 times its limit, a leader that brakes within 18 m."""
 
-FIELDS_SINCE_RULES_11 = ("timeout_waits_at_lights",)
+FIELDS_SINCE_RULES_11 = ("timeout_waits_at_lights", "agents")
 """Suite fields added after episode rules 11: at their default they leave the definition hash as it was."""
 
 
@@ -137,6 +144,10 @@ class Episode:
     the length driven from ``start_pos`` on ``start_lane`` to ``goal_pos``, along the route's
     lanes and the junction lanes between them (``RoadNetwork.route_length``); ``timeout_s`` [s]
     and route completion are measured against it.
+
+    ``others``: the other goal-directed vehicles of a multi-agent episode (``Suite.agents``; vehicles
+    ``ego1``, ``ego2`` ... in that order), each an Episode of its own start, goal, route and timeout, with
+    this one's suite, town, task, index, seed, traffic and rules; () for a single-ego episode.
     """
 
     suite: str
@@ -156,6 +167,7 @@ class Episode:
     success_radius_m: float = 2.0
     end_on_violation: bool = False
     end_on_collision: bool = False
+    others: tuple["Episode", ...] = ()
 
     def __post_init__(self):
         if not self.route:
@@ -167,3 +179,8 @@ class Episode:
     def key(self) -> str:
         """Unique key of the episode within its suite: ``Town01/Straight/3``."""
         return f"{self.town}/{self.task}/{self.index}"
+
+    @property
+    def agents(self) -> tuple["Episode", ...]:
+        """Every goal-directed vehicle's episode, the ego's (this one, without ``others``) first."""
+        return (replace(self, others=()), *self.others) if self.others else (self,)

@@ -160,6 +160,62 @@ for _name, _seed_of, _ends, _what in (
     )
 
 
+register_suite(
+    Suite(
+        name="multi",
+        towns=TOWNS,
+        tasks=("NavigationDynamic",),
+        episodes_per_task=5,
+        seed=2044,
+        end_on_violation=True,
+        timeout_speed_kmh=5.0,
+        timeout_extra_s=20.0,
+        density="regular",
+        agents=8,
+        description="Multi-agent: 8 goal-directed vehicles per episode, each with its own start, goal and "
+        "Navigation route, all driven by the evaluated policy among SUMO's traffic (CoRL2017's regular counts) and "
+        "pedestrians; every vehicle's episode ends by the hbmp suite's rules (its goal or its first violation; "
+        "timeout at 5 km/h + 20 s of its own route) and is scored on its own record; the scene runs until every "
+        "vehicle's has ended.",
+    )
+)
+
+AGENT_START_SPACING_M = 15.0
+"""Least distance between two goal-directed vehicles' starts on the same lane [m] (all stand at the start)."""
+AGENTS_STREAM = 0x4147454E54
+"""Entropy word of the draw of a multi-agent episode's other vehicles (apart from the episode's own draw)."""
+
+
+def with_agents(episode: Episode, agents: int, suite: Suite) -> Episode:
+    """``episode`` with ``agents - 1`` other goal-directed vehicles (``Episode.others``), drawn as the
+    episode's own pose task draws (:func:`sample_episode`) from a generator of (episode seed,
+    :data:`AGENTS_STREAM`, k): a pure function of the episode. A start within
+    :data:`AGENT_START_SPACING_M` of another vehicle's on the same lane is drawn again. ``agents=1``:
+    the episode without others."""
+    if agents < 1:
+        raise ValueError(f"agents must be >= 1, got {agents}")
+    if agents == 1:
+        return dataclasses.replace(episode, others=())
+    pose_task = "Navigation" if episode.task == "NavigationDynamic" else episode.task
+    if pose_task not in TASKS:
+        raise ValueError(f"{episode.task} is a scenario type: its episodes have one goal-directed vehicle")
+    starts = [(episode.start_lane, episode.start_pos)]
+    others = []
+    for k in range(1, agents):
+        rng = np.random.default_rng([episode.seed, AGENTS_STREAM, k])
+        for _ in range(100):
+            other = sample_episode(episode.town, pose_task, rng, suite=suite, index=episode.index, seed=episode.seed,
+                                   traffic=episode.traffic)
+            if all(lane != other.start_lane or abs(pos - other.start_pos) >= AGENT_START_SPACING_M
+                   for lane, pos in starts):
+                break
+        else:
+            raise ValueError(f"no free start for vehicle {k} of {episode.key} in {episode.town}")
+        starts.append((other.start_lane, other.start_pos))
+        others.append(dataclasses.replace(other, task=episode.task))
+    return dataclasses.replace(episode, others=tuple(others))
+
+
 def get_suite(name: str | Suite) -> Suite:
     """A registered suite by name (or the suite itself)."""
     if isinstance(name, Suite):
@@ -489,7 +545,8 @@ def episode_list(suite_name: str, town: str, task: str) -> tuple[Episode, ...]:
             seed=_seed(suite.seed, town, task, i) % (2**31),
             traffic=traffic,
         )
-        episodes.append(dataclasses.replace(episode, task=task))
+        episode = dataclasses.replace(episode, task=task)
+        episodes.append(with_agents(episode, suite.agents, suite) if suite.agents > 1 else episode)
     return tuple(episodes)
 
 

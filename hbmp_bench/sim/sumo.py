@@ -27,6 +27,7 @@ import socket
 import subprocess
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -517,6 +518,22 @@ class SumoSim:
             self._api.vehicle.remove(vehicle_id)
         except _SUMO_ERRORS:
             pass
+
+    def clear_junction_blockers(self, kept: Callable[[str], bool], wait_s: float) -> tuple[str, ...]:
+        """Take out of the simulation every vehicle SUMO drives (not ``kept(id)``: the agents' and scripts')
+        that has stood inside a junction for ``wait_s`` [s] or more; returns their ids.
+
+        SUMO resolves a gridlock by teleporting a vehicle that waited too long (``--time-to-teleport``,
+        which is off here: it would move the agents' vehicles too). Inside a junction only a gridlock holds
+        a car that long: two or three vehicles each in another's path, which the agents' vehicles, driving
+        by their own rules among SUMO's, can close with SUMO's."""
+        api, out = self._api.vehicle, []
+        for vehicle_id in api.getIDList():
+            if not kept(vehicle_id) and api.getWaitingTime(vehicle_id) >= wait_s \
+                    and api.getLaneID(vehicle_id).startswith(":"):
+                self.remove_vehicle(vehicle_id)
+                out.append(vehicle_id)
+        return tuple(out)
 
     def hand_over(self, vehicle_id: str) -> None:
         """Give a vehicle's driving to the caller: no SUMO lane changes, no safe-speed or red-light
