@@ -14,6 +14,9 @@ Protocol (frames on one socket to the env process, see ``channel``):
     agent → env  ready (with the agent's ``AgentDescription``) once built, or an error and exit;
     env → agent  ``("reset", n, info)`` → ok for request n;
     env → agent  ``("act", n, observation, info)`` → an action (int, or vector of floats) for request n;
+                 in a scene (``scene=True``: several goal-directed vehicles, ``envs.scene_env``) the
+                 observation is ``{vehicle: observation}`` and the reply ``{vehicle: action}``, from
+                 the agent wrapped in ``agents.scene.SceneAgent``;
     any exception in the agent → an error text (the process keeps serving).
 Requests are pickled by the (trusted) env process; replies are data only. The process exits
 when the channel closes.
@@ -76,18 +79,32 @@ def runs_only_package_code(spec: str) -> bool:
     return spec in AGENTS or spec.endswith(".pt")
 
 
-def _build(spec: str, hint: str = "") -> tuple[Any, str]:
-    """(the agent, "") or (None, why it could not be built)."""
+def _build(spec: str, hint: str = "", scene: bool = False) -> tuple[Any, str]:
+    """(the agent, "") or (None, why it could not be built); ``scene``: the agent as the driver of a whole
+    scene (``agents.scene.SceneAgent``: a batching agent drives every vehicle, any other one copy each)."""
     try:
         from hbmp_bench.agents import load_agent
 
-        agent = load_agent(spec)
+        if scene:
+            from hbmp_bench.agents.scene import SceneAgent
+
+            agent = SceneAgent(spec)
+        else:
+            agent = load_agent(spec)
         channel.AgentDescription.of(agent)
         return agent, ""
     except (UserError, FileNotFoundError) as exc:  # already one line naming the agent and where it failed
         return None, f"agent could not be built: {exc}{hint}"
     except BaseException:  # noqa: BLE001 - every failure is reported to the env process
         return None, _error_text(f"{spec!r} could not be built: load_agent") + hint
+
+
+def scene_actions(raw: object) -> dict[str, int | tuple[float, ...]]:
+    """A scene agent's reply (``{vehicle: action}``) with each action made plain (:func:`as_action`);
+    TypeError for anything but a dict."""
+    if not isinstance(raw, dict):
+        raise TypeError(f"a scene's actions must be a dict vehicle -> action, got {type(raw).__name__} {raw!r:.80}")
+    return {vehicle: as_action(action) for vehicle, action in raw.items()}
 
 
 def sandbox_entry(argv: list[str] | None = None) -> None:
@@ -108,11 +125,12 @@ def sandbox_entry(argv: list[str] | None = None) -> None:
     if config.get("account") is not None:
         uid, gid = config["account"]
         account = types.SimpleNamespace(pw_uid=int(uid), pw_gid=int(gid), pw_name=f"agent-{uid}", pw_dir="/tmp")
-    agent_main(sock, config["spec"], lifeline, limits, None, account=account, load=config.get("load"))
+    agent_main(sock, config["spec"], lifeline, limits, None, account=account, load=config.get("load"),
+               scene=bool(config.get("scene")))
 
 
 def agent_main(sock: socket.socket, spec: str, lifeline: Connection, limits, environ: dict[str, str] | None = None,
-               account=None, load: str | None = None) -> None:
+               account=None, load: str | None = None, scene: bool = False) -> None:
     """Entry point of the agent process (started by the episode pool with the caller's ``environ``;
     it exits when ``lifeline`` closes).
 
@@ -120,7 +138,8 @@ def agent_main(sock: socket.socket, spec: str, lifeline: Connection, limits, env
     inside the sandbox but before the switch to ``agent_user`` (or ``account``, see
     ``sandbox.enter_sandbox``), so it may read a checkpoint only the caller can read; any other
     is built after the switch, so none of its code runs as root. ``load`` is what
-    ``load_agent`` builds (default ``spec``).
+    ``load_agent`` builds (default ``spec``). ``scene``: the episodes are scenes (every ``act``
+    asks for every deciding vehicle's action; the agent is wrapped in ``agents.scene.SceneAgent``).
     """
     load = load or spec
     from hbmp_bench.evaluation.sandbox import SandboxError, enter_sandbox
@@ -138,7 +157,8 @@ def agent_main(sock: socket.socket, spec: str, lifeline: Connection, limits, env
     early = runs_only_package_code(load)
     try:
         user = enter_sandbox(limits, keep_fds=(sock.fileno(), lifeline.fileno()),
-                             before_switch=(lambda: built.append(_build(load))) if early else None, account=account)
+                             before_switch=(lambda: built.append(_build(load, scene=scene))) if early else None,
+                             account=account)
     except SandboxError as exc:
         end.reply(channel.encode_error(f"the evaluator could not confine the agent process: {exc}"))
         return
@@ -146,7 +166,7 @@ def agent_main(sock: socket.socket, spec: str, lifeline: Connection, limits, env
         hint = "" if user is None else (
             f" (the agent process runs as user {user!r} because the evaluator runs as root: the agent's module and "
             "files must be readable by that user; only a trusted agent may run as root, with agent_user=None)")
-        built.append(_build(load, hint))
+        built.append(_build(load, hint, scene))
     agent, error = built[0]
     if agent is None:
         end.reply(channel.encode_error(error))
@@ -167,7 +187,8 @@ def agent_main(sock: socket.socket, spec: str, lifeline: Connection, limits, env
             elif kind == "act":
                 raw = agent.act(*payload)
                 try:
-                    reply = channel.encode_action(as_action(raw), number)
+                    reply = (channel.encode_actions(scene_actions(raw), number) if scene
+                             else channel.encode_action(as_action(raw), number))
                 except (TypeError, ValueError) as exc:
                     reply = channel.encode_error(f"invalid action: {exc}", number)
             else:

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from hbmp_bench.errors import UserError
 from hbmp_bench.evaluation.results_check import commitment, verify_results
-from hbmp_bench.metrics.results_file import EPISODE_COLUMNS, check_results
+from hbmp_bench.metrics.results_file import EPISODE_COLUMNS, check_results, episode_columns
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, is_privileged, with_agent_env
 from hbmp_bench.metrics.records import SIM_ERROR
 
@@ -39,12 +39,12 @@ class EpisodeAudit:
     """One replayed episode: ``key`` (town, task, episode), and each field whose replay differs
     from the entry's record as ``field: (recorded, replayed)``."""
 
-    key: tuple[str, str, int]
+    key: tuple[str, str, int] | tuple[str, str, int, str]
     mismatches: dict[str, tuple[object, object]]
 
     @property
     def label(self) -> str:
-        return "/".join(map(str, self.key))
+        return "/".join(map(str, self.key[:3])) + (f" vehicle {self.key[3]}" if len(self.key) > 3 else "")
 
 
 @dataclass(frozen=True)
@@ -88,11 +88,12 @@ class AuditResult:
                 "episodes": [{"key": list(e.key), "mismatches": e.mismatches} for e in self.episodes]}
 
 
-def compare(recorded: dict, replayed: dict) -> dict[str, tuple[object, object]]:
-    """The fields of :data:`~hbmp_bench.metrics.results_file.EPISODE_COLUMNS` whose values differ
-    (numbers in :data:`FLOAT_FIELDS` compared as the records round them)."""
+def compare(recorded: dict, replayed: dict, columns: Sequence[str] = EPISODE_COLUMNS) -> dict[str, tuple[object, object]]:
+    """The fields of ``columns`` (default :data:`~hbmp_bench.metrics.results_file.EPISODE_COLUMNS`; a
+    multi-agent suite's: ``episode_columns``) whose values differ (numbers in :data:`FLOAT_FIELDS` compared as
+    the records round them)."""
     out = {}
-    for name in EPISODE_COLUMNS:
+    for name in columns:
         a, b = recorded.get(name), replayed.get(name)
         same = abs(a - b) < 1e-9 if name in FLOAT_FIELDS and isinstance(a, (int, float)) and isinstance(b, (int, float)) \
             else a == b
@@ -104,15 +105,20 @@ def compare(recorded: dict, replayed: dict) -> dict[str, tuple[object, object]]:
 def draw(doc: dict, sample: int, seed: int | None = None, max_sim_s: float | None = None) -> list[dict]:
     """``sample`` episodes of an entry drawn at random (``seed``: repeatable; None: fresh
     randomness), among those that did not end in a ``sim_error`` and, with ``max_sim_s``, that
-    lasted at most that many simulated seconds [s] (a cheap audit, e.g. in CI)."""
+    lasted at most that many simulated seconds [s] (a cheap audit, e.g. in CI). Of a multi-agent
+    entry whole scenes are drawn (a scene counts as one, its rows judged together: every vehicle's);
+    the rows of the drawn scenes are returned."""
     if sample < 1:
         raise UserError(f"sample must be >= 1 episodes, got {sample}")
-    pool = [e for e in doc["episodes"] if e["end_reason"] != SIM_ERROR
-            and (max_sim_s is None or e["duration_s"] <= max_sim_s)]
+    scenes: dict[tuple, list[dict]] = {}
+    for e in doc["episodes"]:
+        scenes.setdefault((e["town"], e["task"], e["episode"]), []).append(e)
+    pool = [rows for rows in scenes.values() if all(e["end_reason"] != SIM_ERROR for e in rows)
+            and (max_sim_s is None or max(e["duration_s"] for e in rows) <= max_sim_s)]
     if not pool:
         raise UserError(f"the entry has no episode to replay{f' of at most {max_sim_s} s' if max_sim_s else ''}")
     rng = random.Random(seed) if seed is not None else random.SystemRandom()
-    return rng.sample(pool, min(sample, len(pool)))
+    return [e for rows in rng.sample(pool, min(sample, len(pool))) for e in rows]
 
 
 def audit(
@@ -162,14 +168,15 @@ def audit(
         claims["privileged"] = (doc["privileged"], True)
     if description.fingerprint != (provenance.get("agent_fingerprint") or ""):
         claims["agent_fingerprint"] = (provenance.get("agent_fingerprint") or "", description.fingerprint)
-    tasks = [EpisodeTask(doc["suite"], e["town"], e["task"], e["episode"], agent, doc["fidelity"], salt) for e in chosen]
+    tasks = list(dict.fromkeys(EpisodeTask(doc["suite"], e["town"], e["task"], e["episode"], agent, doc["fidelity"],
+                                           salt) for e in chosen))
     replayed = {}
     for outcome in iter_outcomes(tasks, workers=workers, limits=limits, progress=progress,
                                  descriptions={agent: description}):
-        record = outcome.record
-        replayed[(record.town, record.task, record.episode)] = record.to_dict()
-    episodes = tuple(EpisodeAudit((e["town"], e["task"], e["episode"]),
-                                  compare(e, replayed[(e["town"], e["task"], e["episode"])])) for e in chosen)
+        for record in outcome.records:
+            replayed[_row_key(record.to_dict())] = record.to_dict()
+    columns = episode_columns(doc["suite"])
+    episodes = tuple(EpisodeAudit(_row_key(e), compare(e, replayed.get(_row_key(e), {}), columns)) for e in chosen)
     notes = []
     if provenance.get("code_fingerprint") != code_fingerprint():
         notes.append(f"the entry ran code {provenance.get('code_fingerprint')}, this is {code_fingerprint()}: "
@@ -179,6 +186,12 @@ def audit(
         notes.append(f"the entry was made on {made_on or 'an unrecorded float platform'}, this is {float_platform()}: "
                      "a mismatch may be float rounding")
     return AuditResult(str(path), agent, episodes, claims, tuple(notes))
+
+
+def _row_key(row: dict) -> tuple:
+    """(town, task, episode), and the vehicle of a multi-agent episode's row."""
+    key = (row["town"], row["task"], row["episode"])
+    return (*key, row["vehicle"]) if row.get("vehicle") else key
 
 
 def audit_lines(result: AuditResult, as_json: bool = False) -> Sequence[str]:

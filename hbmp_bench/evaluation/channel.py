@@ -21,7 +21,15 @@ agent → env (replies): never pickle. A reply is a tag byte, the number ``n`` o
     ``K``     empty                                       ``reset`` done
     ``A``     little-endian int64                         a discrete action
     ``V``     1 … ``MAX_VECTOR`` little-endian float64    a continuous action (control agents)
+    ``M``     UTF-8 JSON object, ≤ ``MAX_SCENE_BYTES``:   the actions of a scene's deciding
+              vehicle id → integer or list of floats      vehicles (``scene_env``), one each
     ========  ==========================================  =====================================
+
+    A scene's ``act`` request carries ``{vehicle: observation}`` and ``{"vehicles": {vehicle: info}}``;
+    its reply must be an ``M`` whose vehicles are exactly the observed ones (the env process checks
+    that: an agent cannot act for a vehicle that does not decide, nor leave one out). Vehicle ids
+    match ``VEHICLE_ID`` (at most ``MAX_VEHICLES``), integers fit in int64, float lists hold 1 …
+    ``MAX_VECTOR`` finite numbers.
 
     Anything else (an unknown tag, a wrong body length, a frame over ``MAX_REPLY_BYTES``, a
     reply to another request than the pending one, data sent while no request is pending,
@@ -38,6 +46,7 @@ from __future__ import annotations
 import json
 import math
 import pickle
+import re
 import socket
 import struct
 import time
@@ -51,7 +60,13 @@ MAX_TEXT_BYTES = 16 * 1024
 """Longest text body (ready description, error message) of a reply [bytes]."""
 MAX_VECTOR = 64
 """Most floats in a continuous action."""
-MAX_REPLY_BYTES = 5 + max(MAX_TEXT_BYTES, 8 * MAX_VECTOR)
+MAX_VEHICLES = 64
+"""Most vehicles in one scene reply."""
+MAX_SCENE_BYTES = 64 * 1024
+"""Longest JSON body of a scene reply [bytes]."""
+VEHICLE_ID = re.compile(r"[A-Za-z][A-Za-z0-9_]{0,31}")
+"""What a vehicle id of a scene reply may be (``ego``, ``ego1`` ...)."""
+MAX_REPLY_BYTES = 5 + max(MAX_TEXT_BYTES, 8 * MAX_VECTOR, MAX_SCENE_BYTES)
 """Longest reply frame the env process accepts [bytes]; a longer one is the agent's error."""
 MAX_DESCRIPTION_ITEMS = 16
 """Most ``env_kwargs`` entries in a ready description."""
@@ -62,7 +77,7 @@ _HEADER = struct.Struct("!I")
 _INT = struct.Struct("<q")
 _REQUEST = struct.Struct("<I")
 
-READY, ERROR, OK, ACTION = "ready", "error", "ok", "action"
+READY, ERROR, OK, ACTION, ACTIONS = "ready", "error", "ok", "action", "actions"
 """Kinds of a decoded reply."""
 
 
@@ -139,6 +154,14 @@ def _reject_constant(name: str):
     raise ValueError(f"{name} is not allowed")
 
 
+def _no_repeats(pairs: list[tuple[str, object]]) -> dict:
+    """A JSON object's pairs as a dict; ValueError when a name repeats (a vehicle acted for twice)."""
+    doc = dict(pairs)
+    if len(doc) != len(pairs):
+        raise ValueError("a name repeats")
+    return doc
+
+
 # ---------------------------------------------------------------------------------------------- codec
 
 
@@ -179,10 +202,41 @@ def encode_action(action: int | tuple[float, ...], request: int) -> bytes:
     return _reply(b"V", request, np.asarray(action, dtype="<f8").tobytes())
 
 
+def encode_actions(actions: dict[str, int | tuple[float, ...]], request: int) -> bytes:
+    """A scene's actions (vehicle id → an action from ``agent_process.as_action``) as the reply to
+    request ``request``; raises ValueError when they cannot be sent (see the module docstring)."""
+    if not isinstance(actions, dict) or not 0 < len(actions) <= MAX_VEHICLES:
+        raise ValueError(f"a scene's actions are a dict of 1 to {MAX_VEHICLES} vehicles, got "
+                         f"{type(actions).__name__} of {len(actions) if isinstance(actions, dict) else '?'}")
+    doc = {}
+    for vehicle, action in actions.items():
+        if not isinstance(vehicle, str) or not VEHICLE_ID.fullmatch(vehicle):
+            raise ValueError(f"vehicle id {vehicle!r} is not a vehicle id (letters, digits, _; at most 32)")
+        _check_scene_action(vehicle, action)
+        doc[vehicle] = action if isinstance(action, int) else list(action)
+    body = json.dumps(doc, allow_nan=False, separators=(",", ":")).encode("utf-8")
+    if len(body) > MAX_SCENE_BYTES:
+        raise ValueError(f"a scene's actions take {len(body)} bytes, the limit is {MAX_SCENE_BYTES}")
+    return _reply(b"M", request, body)
+
+
+def _check_scene_action(vehicle: str, action: object) -> None:
+    if isinstance(action, bool):
+        raise ValueError(f"the action of {vehicle} is a bool")
+    if isinstance(action, int):
+        if not -2**63 <= action < 2**63:
+            raise ValueError(f"the action of {vehicle}, {action}, does not fit in 64 bits")
+        return
+    if not isinstance(action, (tuple, list)) or not 0 < len(action) <= MAX_VECTOR or not all(
+            isinstance(x, float) and not isinstance(x, bool) and math.isfinite(x) for x in action):
+        raise ValueError(f"the action of {vehicle} is no integer nor 1 to {MAX_VECTOR} finite floats: {action!r:.80}")
+
+
 @dataclass(frozen=True)
 class Reply:
-    """A decoded reply: ``kind`` one of ``READY``, ``ERROR``, ``OK``, ``ACTION``; ``value`` an
-    ``AgentDescription``, the error text, None, or the action (int, or tuple of floats);
+    """A decoded reply: ``kind`` one of ``READY``, ``ERROR``, ``OK``, ``ACTION``, ``ACTIONS``; ``value`` an
+    ``AgentDescription``, the error text, None, the action (int, or tuple of floats) or a scene's
+    actions (dict vehicle id → int or tuple of floats);
     ``request`` the number of the request it answers (0: none)."""
 
     kind: str
@@ -198,7 +252,7 @@ def decode_reply(frame: bytes) -> Reply:
     if len(frame) > MAX_REPLY_BYTES:
         raise ProtocolError(f"reply of {len(frame)} bytes, the limit is {MAX_REPLY_BYTES}")
     tag, (request,), body = frame[:1], _REQUEST.unpack(frame[1:5]), frame[5:]
-    if tag not in (b"R", b"E", b"K", b"A", b"V"):
+    if tag not in (b"R", b"E", b"K", b"A", b"V", b"M"):
         raise ProtocolError(f"unknown reply tag {tag!r} ({len(frame)} bytes)")
     reply = _decode_body(tag, body)
     return Reply(reply.kind, reply.value, request)
@@ -231,7 +285,33 @@ def _decode_body(tag: bytes, body: bytes) -> Reply:
         if not all(math.isfinite(x) for x in values):
             raise ProtocolError("vector action with a NaN or infinite entry")
         return Reply(ACTION, values)
+    if tag == b"M":
+        return Reply(ACTIONS, _decode_scene(body))
     raise AssertionError(tag)
+
+
+def _decode_scene(body: bytes) -> dict[str, int | tuple[float, ...]]:
+    """The actions of a scene reply's JSON body, checked against the module docstring's rules."""
+    if len(body) > MAX_SCENE_BYTES:
+        raise ProtocolError(f"scene actions of {len(body)} bytes, the limit is {MAX_SCENE_BYTES}")
+    try:
+        doc = json.loads(body.decode("utf-8"), parse_constant=_reject_constant, object_pairs_hook=_no_repeats)
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise ProtocolError(f"scene actions are not UTF-8 JSON of unique vehicles: {exc}") from None
+    if not isinstance(doc, dict) or not 0 < len(doc) <= MAX_VEHICLES:
+        raise ProtocolError(f"scene actions must be a JSON object of 1 to {MAX_VEHICLES} vehicles")
+    actions: dict[str, int | tuple[float, ...]] = {}
+    for vehicle, action in doc.items():
+        if not VEHICLE_ID.fullmatch(vehicle):
+            raise ProtocolError(f"scene actions name {vehicle[:40]!r}, not a vehicle id")
+        if isinstance(action, list):
+            action = tuple(float(x) if isinstance(x, (int, float)) and not isinstance(x, bool) else x for x in action)
+        try:
+            _check_scene_action(vehicle, action)
+        except ValueError as exc:
+            raise ProtocolError(str(exc)) from None
+        actions[vehicle] = action
+    return actions
 
 
 # ---------------------------------------------------------------------------------------------- frames

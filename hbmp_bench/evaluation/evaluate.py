@@ -36,7 +36,7 @@ from hbmp_bench.evaluation.pool import AgentBuildError, EpisodeOutcome, EpisodeP
 from hbmp_bench.evaluation.salting import SaltKeeper, commitment
 from hbmp_bench.evaluation.tasks import (EpisodeTask, RunnerLimits, agent_slug, is_privileged, suite_tasks,
                                          with_agent_env)
-from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, EpisodeRecord, latest_per_key, repair_records
+from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, EpisodeRecord, repair_records
 
 BACKENDS = ("process", "ray")
 """``process``: an ``EpisodePool`` on this machine; ``ray``: Ray actors (local or a cluster)."""
@@ -48,10 +48,11 @@ class EvaluationResult:
 
     Attributes:
         path: the JSON-lines records file.
-        records: the selection's records (one per episode, the latest), in suite order.
+        records: the selection's records (the latest of each episode: one, or a scene's one per vehicle in
+            vehicle order), in suite order.
         ran / skipped: episodes run by this call / found already finished in the file.
         wall_s: wall time of this call [s].
-        missing: selected episodes with no record (the run was interrupted).
+        missing: selected episodes without their records (the run was interrupted).
         privileged: the env gave the agent the privileged scene fields (it asked for them, or
             the evaluator's limits set them): its scores are not comparable with a learned agent's.
         agent_fingerprint: the agent's weights as its description names them (a learned agent's
@@ -137,10 +138,12 @@ def iter_outcomes(
         else:
             pool = EpisodePool(min(workers or os.cpu_count() or 1, len(tasks)), limits, descriptions=descriptions)
             source = pool_imap(pool, tasks)
-        for n, outcome in enumerate(source, start=1):
-            successes += outcome.record.success
+        driven = 0
+        for outcome in source:
+            successes += sum(r.success for r in outcome.records)
+            driven += len(outcome.records)
             bar.update(1)
-            bar.set_postfix(success=f"{successes / n:.0%}")
+            bar.set_postfix(success=f"{successes / max(driven, 1):.0%}")
             yield outcome
 
 
@@ -212,7 +215,7 @@ def evaluate(
         fingerprint = description.fingerprint
         check_provenance(path, agent, fingerprint, sorted({t.town for t in selection}))
         seal.write()
-        finished = {r.key for r in latest_per_key(ledger.records()) if r.end_reason != SIM_ERROR}
+        finished = finished_episodes(ledger.records(), selection)
         todo = [t for t in selection if t.key not in finished]
         _check_salt_kept(path, keeper, salt, todo)
         start = time.perf_counter()
@@ -220,11 +223,12 @@ def evaluate(
                                workers=workers, backend=backend, address=address, limits=limits, progress=progress,
                                descriptions={agent: description})
         records = ledger.records()
-        done = {r.key for r in records if r.end_reason != SIM_ERROR}
+        done = finished_episodes(records, selection)
         revealed = keeper.reveal() if salt and all(t.key in done for t in selection) else ""
-    records = _in_selection_order(records, selection)
-    return EvaluationResult(path, tuple(records), ran, len(selection) - len(todo), time.perf_counter() - start,
-                            len(selection) - len(records), privileged=is_privileged(limits),
+    kept = episode_records(records, selection)
+    return EvaluationResult(path, tuple(r for t in selection if t.key in kept for r in kept[t.key]), ran,
+                            len(selection) - len(todo), time.perf_counter() - start,
+                            len(selection) - len(kept), privileged=is_privileged(limits),
                             agent_fingerprint=fingerprint, salt_commitment=commitment(salt) if salt else "",
                             salt=revealed)
 
@@ -236,10 +240,30 @@ def _check_salt_kept(path: Path, keeper: SaltKeeper, salt: str, todo: Sequence[E
                         f"of more episodes goes into another folder (--out)")
 
 
-def _in_selection_order(records: Sequence[EpisodeRecord], selection: Sequence[EpisodeTask]) -> list[EpisodeRecord]:
-    """The latest record of each selected episode, in the selection's order."""
-    wanted = {t.key: k for k, t in enumerate(selection)}
-    return sorted((r for r in latest_per_key(records) if r.key in wanted), key=lambda r: wanted[r.key])
+def episode_key(record: EpisodeRecord) -> tuple[str, str, str, int, str, str]:
+    """The episode a record is of, as ``EpisodeTask.key`` names it (a scene's N records share it)."""
+    return (record.suite, record.town, record.task, record.episode, record.agent, record.fidelity)
+
+
+def episode_records(records: Sequence[EpisodeRecord], selection: Sequence[EpisodeTask]
+                    ) -> dict[tuple, tuple[EpisodeRecord, ...]]:
+    """Per selected episode (``EpisodeTask.key``) whose every vehicle (``EpisodeTask.vehicles``) has a record:
+    the latest record of each, in vehicle order. A later run of an episode (after a ``sim_error``) wins
+    vehicle by vehicle; an episode a vehicle of which has no record is left out (it is run again)."""
+    vehicles = {t.key: t.vehicles for t in selection}
+    latest: dict[tuple, dict[str, EpisodeRecord]] = {}
+    for record in records:
+        key = episode_key(record)
+        if key in vehicles:
+            latest.setdefault(key, {})[record.vehicle] = record
+    return {key: tuple(latest[key][v] for v in vehicles[key]) for key in vehicles
+            if key in latest and set(vehicles[key]) <= set(latest[key])}
+
+
+def finished_episodes(records: Sequence[EpisodeRecord], selection: Sequence[EpisodeTask]) -> set[tuple]:
+    """The selected episodes (``EpisodeTask.key``) whose records are all there and none a ``sim_error``."""
+    return {key for key, rows in episode_records(records, selection).items()
+            if all(r.end_reason != SIM_ERROR for r in rows)}
 
 
 def _open_records(path: Path):
@@ -263,7 +287,7 @@ def _record_outcomes(todo: list, ledger: RecordsLedger, seal: RecordsSeal, *, ke
     ran = 0
     try:
         for outcome in iter_outcomes(todo, **run):
-            ledger.append(outcome.record)
+            ledger.append(*outcome.records)
             seal.write()
             ran += 1
     except KeyboardInterrupt:  # the pool has ended its processes on the way out

@@ -39,7 +39,7 @@ from pathlib import Path
 
 from hbmp_bench.errors import UserError
 from hbmp_bench.locks import Busy, exclusive_lock
-from hbmp_bench.metrics.records import EpisodeRecord, append_record, parse_records, record_line
+from hbmp_bench.metrics.records import EpisodeRecord, parse_records, record_line
 
 
 class TamperedError(UserError):
@@ -104,15 +104,20 @@ class RecordsLedger:
             raise self._tampered(f"found {len(data)} bytes, expected {self.size} after {n} record(s) appended by this run")
         return data
 
-    def append(self, record: EpisodeRecord) -> None:
-        """Append ``record`` (``append_record``), checking the file before and after."""
+    def append(self, *records: EpisodeRecord) -> None:
+        """Append an episode's ``records`` (one, or a scene's one per vehicle) in one write, flushed and
+        fsynced, checking the file before and after."""
         before = self.verified()
-        append_record(self.path, record)
-        expected = before + record_line(record).encode("utf-8")
+        data = "".join(record_line(r) for r in records).encode("utf-8")
+        with open(self.path, "ab") as fh:
+            fh.write(data)
+            fh.flush()
+            os.fsync(fh.fileno())
+        expected = before + data
         if self._read() != expected:
             raise self._tampered("while a record was appended")
         self.size, self.digest = len(expected), _digest(expected)
-        self.appended += 1
+        self.appended += len(records)
 
     def records(self) -> list[EpisodeRecord]:
         """Every record of the file, parsed from its verified bytes."""

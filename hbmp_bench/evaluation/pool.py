@@ -39,7 +39,7 @@ from hbmp_bench.evaluation import channel
 from hbmp_bench.evaluation.agent_process import agent_main
 from hbmp_bench.evaluation.namespaces import (AgentUidLease, SandboxedProcess, SandboxUnavailable, agent_files,
                                               mounted_paths, sandbox_problem, start_sandboxed)
-from hbmp_bench.evaluation.env_process import blank_record, env_main
+from hbmp_bench.evaluation.env_process import blank_records, env_main
 from hbmp_bench.evaluation.sandbox import agent_account, kill_session, protect_process, reap_orphans
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits, with_agent_env
 from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, EpisodeRecord
@@ -147,10 +147,11 @@ def agent_sys_path(mounted: list[str]) -> list[str]:
 
 
 def start_agent(ctx, agent: str, sock: socket.socket, life_r: Connection, limits: RunnerLimits,
-                lease: AgentUidLease | None = None):
+                lease: AgentUidLease | None = None, scene: bool = False):
     """Start an agent process for ``agent`` on its end ``sock`` of a channel (closed here once
     passed): in the namespace sandbox (``isolation``; as uid ``lease`` when the evaluator is
-    root), or forked by ``ctx``'s fork server."""
+    root), or forked by ``ctx``'s fork server. ``scene``: it drives a scene (every vehicle's
+    action in one reply, ``agents.scene.SceneAgent``)."""
     try:
         if isolation(agent, limits) == SANDBOX:
             load = os.path.abspath(agent) if agent.endswith(".pt") else agent
@@ -158,11 +159,12 @@ def start_agent(ctx, agent: str, sock: socket.socket, life_r: Connection, limits
             config = {"spec": agent, "load": load, "sys_path": agent_sys_path(mounted_paths(readable)),
                       "channel": sock.fileno(), "lifeline": life_r.fileno(),
                       "limits": {k: getattr(limits, k) for k in AGENT_LIMITS},
-                      "account": None if lease is None else [lease.uid, lease.gid]}
+                      "account": None if lease is None else [lease.uid, lease.gid], "scene": scene}
             return start_sandboxed(config, (sock.fileno(), life_r.fileno()), readable=readable,
                                    writable=limits.agent_writable, extra_env=limits.agent_env,
                                    tmp_mb=limits.agent_file_mb)
-        proc = ctx.Process(target=agent_main, args=(sock, agent, life_r, limits, dict(os.environ)), name="hbmp-agent")
+        proc = ctx.Process(target=agent_main, args=(sock, agent, life_r, limits, dict(os.environ)),
+                           kwargs={"scene": scene}, name="hbmp-agent")
         proc.start()
     finally:
         sock.close()
@@ -275,13 +277,19 @@ class AgentBuildError(UserError):
 
 @dataclass(frozen=True)
 class EpisodeOutcome:
-    """A finished episode: its record, how many attempts it took, and the agent's decision times [s]
+    """A finished episode: its records (one per vehicle of its task, ``EpisodeTask.vehicles``: one for a
+    single-ego episode, N for a scene), how many attempts it took, and the agent's decision times [s]
     (round trip through the channel; 0 when no decision was made)."""
 
-    record: EpisodeRecord
+    records: tuple[EpisodeRecord, ...]
     attempts: int
     max_decision_s: float
     mean_decision_s: float
+
+    @property
+    def record(self) -> EpisodeRecord:
+        """The record of a single-ego episode (a scene's first vehicle's, ``ego``)."""
+        return self.records[0]
 
 
 class _Slot:
@@ -331,7 +339,7 @@ class _Slot:
             if task.agent not in self.leases:
                 self.leases[task.agent] = uid_lease_for(task.agent, self.limits)
             self.agent_proc = start_agent(self.ctx, task.agent, agent_sock, self.life_r, self.limits,
-                                          self.leases[task.agent])
+                                          self.leases[task.agent], scene=task.scene)
             self.conn.send(("run", (task, env.env_factory, env.env_kwargs)))
             reduction.send_handle(self.conn, env_sock.fileno(), self.env_proc.pid)
         except OSError:
@@ -476,7 +484,7 @@ class EpisodePool:
                 attempts[task] = attempts.get(task, 0) + 1
                 env = self.agent_env(task.agent)
                 if isinstance(env, str):
-                    yield EpisodeOutcome(blank_record(task, AGENT_ERROR, env), attempts[task], 0.0, 0.0)
+                    yield EpisodeOutcome(blank_records(task, AGENT_ERROR, env), attempts[task], 0.0, 0.0)
                     continue
                 slot.run(task, env)
 
@@ -504,13 +512,13 @@ class EpisodePool:
         if payload["restart"]:
             slot.stop(graceful=False)
         if payload["status"] == SIM_ERROR:
-            yield from self._sim_failure(task, payload["record"]["error"], attempts, pending)
+            yield from self._sim_failure(task, payload["records"][0]["error"], attempts, pending)
             return
-        record = EpisodeRecord(**payload["record"])
+        records = tuple(EpisodeRecord(**row) for row in payload["records"])
         if failed and code:
-            record = dataclasses.replace(record, error=f"{record.error}\n({exit_note(code, self.limits)})")
-        record = self._with_attempts(record, task)
-        yield EpisodeOutcome(record, attempts[task], payload["max_decision_s"], payload["mean_decision_s"])
+            records = tuple(dataclasses.replace(r, error=f"{r.error}\n({exit_note(code, self.limits)})") for r in records)
+        yield EpisodeOutcome(self._with_attempts(records, task), attempts[task], payload["max_decision_s"],
+                             payload["mean_decision_s"])
 
     def _watchdog(self, attempts: dict, pending: deque) -> Iterator[EpisodeOutcome]:
         """Kill the env processes silent past their allowance; the episode is the agent's failure if it had the turn."""
@@ -533,18 +541,18 @@ class EpisodePool:
         the episode; it is not retried."""
         error = (f"{reason} while the agent had the turn (waiting for its answer, the simulator was idle): "
                  "the episode is the agent's failure, not retried")
-        return EpisodeOutcome(self._with_attempts(blank_record(task, AGENT_ERROR, error), task), attempts[task],
+        return EpisodeOutcome(self._with_attempts(blank_records(task, AGENT_ERROR, error), task), attempts[task],
                               0.0, 0.0)
 
-    def _with_attempts(self, record: EpisodeRecord, task: EpisodeTask) -> EpisodeRecord:
-        """``record`` with the earlier attempts of its episode (simulator failures that were
-        retried) added to its ``error``, so a retry is never silent."""
+    def _with_attempts(self, records: tuple[EpisodeRecord, ...], task: EpisodeTask) -> tuple[EpisodeRecord, ...]:
+        """``records`` (an episode's, one per vehicle) with the earlier attempts of their episode (simulator
+        failures that were retried) added to each one's ``error``, so a retry is never silent."""
         earlier = self._failed_attempts.pop(task, [])
         if not earlier:
-            return record
+            return records
         lines = [f"attempt {k} of {len(earlier) + 1}: {why}" for k, why in enumerate(earlier, start=1)]
         note = f"{RETRIED}: recorded from attempt {len(earlier) + 1}; " + "; ".join(lines)
-        return dataclasses.replace(record, error=f"{record.error}\n{note}" if record.error else note)
+        return tuple(dataclasses.replace(r, error=f"{r.error}\n{note}" if r.error else note) for r in records)
 
     def _sim_failure(self, task: EpisodeTask, reason: str, attempts: dict, pending: deque) -> Iterator[EpisodeOutcome]:
         """Retry ``task`` (at the front of the queue; the record it ends with names this attempt)
@@ -553,4 +561,4 @@ class EpisodePool:
             self._failed_attempts.setdefault(task, []).append(" ".join(reason.split())[:500])
             pending.appendleft(task)
             return
-        yield EpisodeOutcome(self._with_attempts(blank_record(task, SIM_ERROR, reason), task), attempts[task], 0.0, 0.0)
+        yield EpisodeOutcome(self._with_attempts(blank_records(task, SIM_ERROR, reason), task), attempts[task], 0.0, 0.0)

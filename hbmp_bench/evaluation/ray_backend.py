@@ -12,7 +12,7 @@ from collections import deque
 from collections.abc import Iterable, Iterator, Mapping
 
 from hbmp_bench.evaluation.channel import AgentDescription
-from hbmp_bench.evaluation.env_process import blank_record
+from hbmp_bench.evaluation.env_process import blank_records
 from hbmp_bench.evaluation.pool import EpisodeOutcome, EpisodePool
 from hbmp_bench.evaluation.tasks import EpisodeTask, RunnerLimits
 from hbmp_bench.metrics.records import SIM_ERROR
@@ -96,7 +96,7 @@ def ray_imap(
                     outcome = None
                 else:
                     reason = f"ray worker failed: {type(exc).__name__}: {str(exc)[:500]}"
-                    outcome = EpisodeOutcome(blank_record(task, SIM_ERROR, reason), attempts[task], 0.0, 0.0)
+                    outcome = EpisodeOutcome(blank_records(task, SIM_ERROR, reason), attempts[task], 0.0, 0.0)
             if pending:
                 submit(actor)
             if outcome is not None:

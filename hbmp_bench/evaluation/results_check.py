@@ -37,7 +37,9 @@ from pathlib import Path
 
 from hbmp_bench.errors import UserError
 from hbmp_bench.metrics.records import AGENT_ERROR, SIM_ERROR, driving_score
-from hbmp_bench.metrics.results_file import EPISODE_COLUMNS, ForgedResultsError, name_problems, results_records
+from hbmp_bench.evaluation.tasks import scene_vehicles, vehicle_episode
+from hbmp_bench.metrics.results_file import (EPISODE_COLUMNS, SCENE_COLUMNS, ForgedResultsError, episode_columns,
+                                             name_problems, results_records)
 from hbmp_bench.vocabulary import COLLISION_KINDS, INFRACTION_KINDS, VIOLATION_KINDS
 
 WORLD_END_REASONS = ("goal", "timeout", "collision", "violation", "left_network")
@@ -72,29 +74,33 @@ def contained(path: Path, folder: Path) -> Path:
 
 
 def _label(row: dict) -> str:
-    return f"episode {row.get('town')}/{row.get('task')}/{row.get('episode')}"
+    vehicle = row.get("vehicle")
+    return f"episode {row.get('town')}/{row.get('task')}/{row.get('episode')}" + (f" vehicle {vehicle}" if vehicle else "")
 
 
-def record_problems(row: dict, *, end_on_violation: bool, end_on_collision: bool) -> list[str]:
+def record_problems(row: dict, *, end_on_violation: bool, end_on_collision: bool,
+                    columns: tuple[str, ...] = EPISODE_COLUMNS) -> list[str]:
     """Contradictions within one episode row of a results file (the suite's rules given by
-    ``end_on_violation``, the paper's protocol, and ``end_on_collision``, NoCrash's)."""
+    ``end_on_violation``, the paper's protocol, and ``end_on_collision``, NoCrash's; ``columns``: the
+    suite's, ``results_file.episode_columns``)."""
     where = _label(row)
-    shape = _row_shape_problems(row, where)
+    shape = _row_shape_problems(row, where, columns)
     if shape:
         return shape
     return [*_outcome_problems(row, where), *_rule_problems(row, where, end_on_violation, end_on_collision)]
 
 
-def _row_shape_problems(row: dict, where: str) -> list[str]:
+def _row_shape_problems(row: dict, where: str, columns: tuple[str, ...]) -> list[str]:
     """A missing column, or a value of the wrong type or sign (then nothing else of the row is judged)."""
-    missing = [k for k in EPISODE_COLUMNS if k not in row]
+    missing = [k for k in columns if k not in row]
     if missing:
         return [f"{where} lacks {missing}"]
     bad = [k for k in _INT_FIELDS if isinstance(row[k], bool) or not isinstance(row[k], int) or row[k] < 0]
     bad += [k for k in _FLOAT_FIELDS if isinstance(row[k], bool) or not isinstance(row[k], (int, float))
             or not math.isfinite(row[k]) or row[k] < 0]
     bad += [k for k in ("success", "timeout") if not isinstance(row[k], bool)]
-    bad += [k for k in ("town", "task", "end_reason", "error") if not isinstance(row[k], str)]
+    bad += [k for k in ("town", "task", "end_reason", "error", *SCENE_COLUMNS) if k in columns
+            and not isinstance(row[k], str)]
     if bad:
         return [f"{where} has invalid {sorted(set(bad))} (counts and indices: integers >= 0; measures: finite "
                 "numbers >= 0; success, timeout: true or false)"]
@@ -162,11 +168,15 @@ def episode_problems(doc: dict, *, against_suite: bool) -> list[str]:
         return ["its selection names towns and tasks by strings and episodes by integers"]
     problems = _selection_problems(spec, towns, tasks, indices, against_suite)
     rows = doc["episodes"]
+    columns = episode_columns(spec.name)
     for row in rows:
-        problems += record_problems(row, end_on_violation=spec.end_on_violation, end_on_collision=spec.end_on_collision)
+        problems += record_problems(row, end_on_violation=spec.end_on_violation, end_on_collision=spec.end_on_collision,
+                                    columns=columns)
     if problems:
         return problems
-    problems = _key_problems(rows, towns, tasks, indices)
+    problems = _key_problems(rows, towns, tasks, indices, scene_vehicles(spec.name))
+    if not problems and spec.agents > 1:
+        problems = _scene_problems(rows)
     if problems or not against_suite:
         return problems
     return _reference_problems(spec, rows)
@@ -191,17 +201,56 @@ def _selection_problems(spec, towns: list, tasks: list, indices: list, against_s
     return problems
 
 
-def _key_problems(rows: list[dict], towns: list, tasks: list, indices: list) -> list[str]:
-    """Episodes that appear more than once or lie outside the selection."""
+def _key_problems(rows: list[dict], towns: list, tasks: list, indices: list, vehicles: tuple[str, ...]) -> list[str]:
+    """Episodes that appear more than once or lie outside the selection, and (a multi-agent suite's) episodes
+    whose rows are not exactly one per vehicle of the scene (``vehicles``: ``tasks.scene_vehicles``): a vehicle
+    missing, twice, or one the scene has not."""
     problems = []
     wanted = {(town, task, i) for town in towns for task in tasks for i in indices}
-    keys = Counter((r["town"], r["task"], r["episode"]) for r in rows)
+    keys = Counter((r["town"], r["task"], r["episode"], r.get("vehicle", "")) for r in rows)
     repeated = sorted(k for k, n in keys.items() if n > 1)
-    extra = sorted(set(keys) - wanted)
+    extra = sorted({k[:3] for k in keys} - wanted)
     if repeated:
-        problems.append(f"{len(repeated)} episodes appear more than once (e.g. {'/'.join(map(str, repeated[0]))})")
+        problems.append(f"{len(repeated)} episodes appear more than once (e.g. {_key_label(repeated[0])})")
     if extra:
         problems.append(f"{len(extra)} episodes are outside its selection (e.g. {'/'.join(map(str, extra[0]))})")
+    held: dict[tuple, set] = {}
+    for town, task, index, vehicle in keys:
+        held.setdefault((town, task, index), set()).add(vehicle)
+    for key in sorted(held):
+        if held[key] != set(vehicles):
+            missing, foreign = sorted(set(vehicles) - held[key]), sorted(held[key] - set(vehicles))
+            problems.append(f"episode {'/'.join(map(str, key))} has rows of vehicles {sorted(held[key])}, its scene's "
+                            f"are {list(vehicles)}" + (f" (missing {missing})" if missing else "")
+                            + (f" (not of the scene: {foreign})" if foreign else ""))
+    return problems
+
+
+def _key_label(key: tuple) -> str:
+    return "/".join(map(str, key[:3])) + (f" vehicle {key[3]}" if key[3] else "")
+
+
+def _scene_problems(rows: list[dict]) -> list[str]:
+    """Collisions between a scene's goal-directed vehicles that its rows do not agree on: a vehicle named
+    that is not another vehicle of the scene, a pair in one vehicle's row and not the other's, or more such
+    collisions than the row's vehicle collisions (``collision_vehicle`` counts them too)."""
+    problems = []
+    scenes: dict[tuple, dict[str, list[str]]] = {}
+    for r in rows:
+        scenes.setdefault((r["town"], r["task"], r["episode"]), {})[r["vehicle"]] = r["agent_collisions"].split()
+    for row in rows:
+        where, named = _label(row), row["agent_collisions"].split()
+        scene = scenes[row["town"], row["task"], row["episode"]]
+        if len(set(named)) != len(named) or named != sorted(named):
+            problems.append(f"{where} names agent collisions {named} out of order or twice")
+        for other in named:
+            if other == row["vehicle"] or other not in scene:
+                problems.append(f"{where} collided with {other!r}, not another vehicle of its scene")
+            elif row["vehicle"] not in scene[other]:
+                problems.append(f"{where} collided with {other}, whose row does not name {row['vehicle']}")
+        if len(named) > row["collision_vehicle"]:
+            problems.append(f"{where} collided with {len(named)} controlled agents but counts "
+                            f"{row['collision_vehicle']} vehicle collisions")
     return problems
 
 
@@ -211,7 +260,8 @@ def _reference_problems(spec, rows: list[dict]) -> list[str]:
 
     problems = []
     for row in rows:
-        reference = suite_episodes(spec.name, row["town"], row["task"])[row["episode"]]
+        reference = vehicle_episode(suite_episodes(spec.name, row["town"], row["task"])[row["episode"]],
+                                    row.get("vehicle", ""))
         where = _label(row)
         if row["seed"] != reference.seed:
             problems.append(f"{where} has seed {row['seed']}, the suite's episode {reference.seed}")
@@ -247,10 +297,11 @@ def claim_problems(doc: dict, recomputed: dict) -> list[str]:
     extra = sorted(set(summary) - set(recomputed["summary"]))
     if extra:
         problems.append(f"its summary has fields no episode gives: {extra}")
-    claimed = (doc.get("aggregates") or {}).get("success_pct_by_task") if isinstance(doc.get("aggregates"), dict) else None
-    if not _same(claimed, recomputed["aggregates"].get("success_pct_by_task")):
-        problems.append(f"it says success_pct_by_task={claimed!r}, its episodes give "
-                        f"{recomputed['aggregates'].get('success_pct_by_task')!r}")
+    aggregates = doc.get("aggregates") if isinstance(doc.get("aggregates"), dict) else {}
+    for view in ("success_pct_by_task", "multi_by_town"):
+        claimed, given = aggregates.get(view), recomputed["aggregates"].get(view)
+        if not _same(claimed, given):
+            problems.append(f"it says {view}={claimed!r}, its episodes give {given!r}")
     return problems
 
 

@@ -66,6 +66,6 @@ def run_jobs(jobs: Iterable[Job], workers: int = 1, progress: bool = True) -> li
     jobs = list(jobs)
     fidelity = default_fidelity()
     tasks = [EpisodeTask(j.suite, j.town, j.task, i, j.agent, j.fidelity or fidelity) for j in jobs for i in j.episodes]
-    records = [o.record for o in iter_outcomes(tasks, workers=workers, progress=progress)]
+    records = [r for o in iter_outcomes(tasks, workers=workers, progress=progress) for r in o.records]
     order = {t.key: k for k, t in enumerate(tasks)}
     return sorted(records, key=lambda r: order.get(r.key, len(order)))

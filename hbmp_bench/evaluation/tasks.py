@@ -49,6 +49,36 @@ class EpisodeTask:
     def label(self) -> str:
         return f"{self.town}/{self.task}/{self.episode}"
 
+    @property
+    def vehicles(self) -> tuple[str, ...]:
+        """The vehicles its records name, in order (:func:`scene_vehicles` of its suite)."""
+        return scene_vehicles(self.suite)
+
+    @property
+    def scene(self) -> bool:
+        """Whether the task is a scene: several goal-directed vehicles, one record each (``Suite.agents`` > 1)."""
+        return get_suite(self.suite).agents > 1
+
+
+def scene_vehicles(suite: str) -> tuple[str, ...]:
+    """The ``EpisodeRecord.vehicle`` of each record one episode of ``suite`` produces, in order: ``("",)`` for a
+    single-ego suite (its one record names no vehicle), ``("ego", "ego1", ..., "ego{N-1}")`` for a suite of
+    ``N`` goal-directed vehicles (``Suite.agents``; vehicle ``k`` drives ``Episode.agents[k]``)."""
+    agents = get_suite(suite).agents
+    return ("",) if agents == 1 else ("ego", *(f"ego{k}" for k in range(1, agents)))
+
+
+def vehicle_episode(episode, vehicle: str):
+    """The suite episode (``scenarios.Episode``) ``vehicle`` drives in ``episode`` ("" or ``ego``: the episode's
+    own, ``ego{k}``: ``episode.others[k - 1]``); KeyError for a vehicle the episode has not."""
+    drivers = episode.agents
+    names = ("ego", *(f"ego{k}" for k in range(1, len(drivers))))
+    if vehicle == "" and len(drivers) == 1:
+        return drivers[0]
+    if vehicle not in names:
+        raise KeyError(f"episode {episode.key} has no goal-directed vehicle {vehicle!r} (it has {', '.join(names)})")
+    return drivers[names.index(vehicle)]
+
 
 @dataclass(frozen=True)
 class RunnerLimits:
@@ -268,10 +298,19 @@ def watch_lifeline(lifeline) -> None:
     threading.Thread(target=wait_for_eof, name="hbmp-lifeline", daemon=True).start()
 
 
+BEHAVIOR_ENV = "hbmp_bench.envs.behavior_env:BehaviorEnv"
+"""The env an episode runs in unless the agent or the evaluator names another (``RunnerLimits.env_factory``)."""
+SCENE_ENV = "hbmp_bench.envs.scene_env:SceneEnv"
+"""The env a scene runs in (an episode of a suite with ``Suite.agents`` > 1: one env holds every vehicle)."""
+
 AGENT_ENV_FACTORIES = ("hbmp_bench.envs.control_env:ControlEnv",)
 """Envs an agent may ask for besides the behavior env (the flat baseline's control env). Only the
 evaluator (``RunnerLimits.env_factory``) may name another: an agent naming its own module would
 run its code in the env process."""
+
+SCENE_FORMS: dict[str | None, dict[str, Any]] = {None: {}, "hbmp_bench.envs.control_env:ControlEnv": {"ego_driver": "control"}}
+"""How a scene (:data:`SCENE_ENV`) runs the env an agent asks for (None: the behavior env; the control env:
+every goal-directed vehicle driven by control vectors)."""
 
 
 def is_privileged(limits: RunnerLimits) -> bool:

@@ -32,6 +32,16 @@ EPISODE_COLUMNS = (
 )
 """Per-episode fields kept in a results file."""
 
+SCENE_COLUMNS = ("vehicle", "agent_collisions")
+"""Per-episode fields a multi-agent suite's results file keeps besides :data:`EPISODE_COLUMNS` (its rows are one
+per goal-directed vehicle of each scene, see ``EpisodeRecord``)."""
+
+
+def episode_columns(suite: str) -> tuple[str, ...]:
+    """The per-episode fields of a results file of ``suite``: :data:`EPISODE_COLUMNS`, and :data:`SCENE_COLUMNS`
+    for a multi-agent suite (``Suite.agents`` > 1)."""
+    return (*EPISODE_COLUMNS, *SCENE_COLUMNS) if get_suite(suite).agents > 1 else EPISODE_COLUMNS
+
 
 NAME_PATTERN = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.:+-]{0,127}")
 """What a suite, fidelity or agent name of a results file may be: letters, digits and ``_ . : + -``,
