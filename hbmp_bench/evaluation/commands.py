@@ -74,15 +74,22 @@ def _add_selection(p: argparse.ArgumentParser, agent_default: str | None) -> Non
 @_missing_extra_is_user_error
 def _cmd_evaluate(args: argparse.Namespace) -> int:
     from hbmp_bench.evaluation.evaluate import evaluate
-    from hbmp_bench.metrics.report import records_frame, success_table
+    from hbmp_bench.metrics.report import VIEW_LEGENDS, records_frame, success_table
     from hbmp_bench.metrics.summary import SUCCESS_TABLE_TITLE, summarize, summary_lines
 
     result = evaluate(args.suite, args.agent, towns=args.towns, tasks=args.tasks, episodes=args.episodes,
                       fidelity=args.fidelity, out_dir=args.out, workers=args.workers, backend=args.backend,
                       address=args.address, limits=_limits(args), progress=not args.json, salted=args.salted)
+    from hbmp_bench.metrics.report import EXCLUDED, multi_table
+    from hbmp_bench.metrics.summary import scene_summary
+    from hbmp_bench.scenarios import get_suite
+
+    scene = get_suite(args.suite).agents > 1
     summary = {"records": str(result.path), "ran": result.ran, "skipped": result.skipped,
                "missing": result.missing, "wall_s": round(result.wall_s, 2), "sim_errors": result.sim_errors,
                "agent_errors": result.agent_errors, **summarize(result.records)}
+    if scene:
+        summary.update(scene_summary([r for r in result.records if r.end_reason not in EXCLUDED]))
     if args.salted:
         summary.update(salt_commitment=result.salt_commitment, salt=result.salt or "(revealed once every episode is recorded)")
     if args.json:
@@ -91,6 +98,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if result.records:
         print(SUCCESS_TABLE_TITLE)
         print(success_table(records_frame(result.records)).to_string())
+        print()
+    if result.records and scene:
+        print(VIEW_LEGENDS["multi"])
+        print(multi_table(records_frame(result.records)).to_string())
         print()
     print("\n".join(summary_lines(summary)))
     return 0

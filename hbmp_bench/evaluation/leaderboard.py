@@ -47,7 +47,8 @@ from hbmp_bench.evaluation.tasks import RunnerLimits, agent_slug, suite_tasks
 from hbmp_bench.metrics.records import DRIVING_SCORE_DEFINITION, EpisodeRecord
 from hbmp_bench.metrics.report import scores
 from hbmp_bench.metrics.results_file import (  # noqa: F401  (StaleResultsError, results_records: the board's names too)
-    EPISODE_COLUMNS, RESULTS_FORMAT, ForgedResultsError, StaleResultsError, check_name, check_results, results_records)
+    EPISODE_COLUMNS, RESULTS_FORMAT, ForgedResultsError, StaleResultsError, check_name, check_results, episode_columns,
+    results_records)
 from hbmp_bench.scenarios import TASK_LABELS, get_suite
 
 def entry_path(board_dir: str | os.PathLike, suite: str, agent: str, subset: bool, fidelity: str) -> Path:
@@ -107,7 +108,7 @@ def results_document(
         "privileged": bool(privileged),
         "salted": bool(salt_commitment),
         **scored,
-        "episodes": [{k: r.to_dict()[k] for k in EPISODE_COLUMNS} for r in records],
+        "episodes": [{k: r.to_dict()[k] for k in episode_columns(spec.name)} for r in records],
         "provenance": {
             "package_version": __version__,
             "git_commit": git_commit(),
@@ -260,8 +261,93 @@ def _table(rows: Iterable[list[str]], tasks: Sequence[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
+MULTI_COLUMNS = ("agents in agent collision %", "agent pairs collided", "other collisions", "red lights",
+                 "wrong lane", "timeouts", "arrived / min")
+"""The scene figures of a multi-agent board's rows, after the per-town success columns."""
+MULTI_FIGURES = ("agents_in_agent_collision_pct", "agent_collision_pairs", "other_collisions", "red_light",
+                 "wrong_lane", "timeouts", "throughput_per_min")
+"""The ``summary.scene_summary`` keys of :data:`MULTI_COLUMNS`, in their order."""
+
+
+def _figure(value) -> str:
+    return f"{value:.1f}" if isinstance(value, float) else str(value)
+
+
+def multi_header(towns: Sequence[str]) -> list[str]:
+    """The columns of a multi-agent suite's board: success % of the agents, per town, the scene figures."""
+    return ["rank", "agent", "privileged", "success % (agents)", *(f"{t} %" for t in towns), *MULTI_COLUMNS,
+            "scenes", "agents", "sim errors", "version", "commit", "weights", "date", "wall s", "salted"]
+
+
+def _multi_row(doc: dict, rank: str, towns: Sequence[str]) -> list[str]:
+    s, prov = doc["summary"], doc["provenance"]
+    by_town = doc["aggregates"].get("multi_by_town", {})
+    return [
+        rank, f"`{doc['agent']}`", "yes" if doc["privileged"] else "no", f"{s.get('agent_success_pct', 0.0):.1f}",
+        *(f"{by_town[t]['agent_success_pct']:.1f}" if t in by_town else "–" for t in towns),
+        *(_figure(s.get(k, 0)) for k in MULTI_FIGURES),
+        f"{s.get('scenes', 0)} of {_suite_episodes(doc['suite'])}", str(s.get("agents", 0)),
+        str(doc.get("sim_errors", 0)), prov.get("package_version") or "", (prov.get("git_commit") or "")[:10],
+        _weights(doc), (prov.get("date_utc") or "")[:10],
+        "" if prov.get("wall_time_s") is None else f"{prov['wall_time_s']:.0f}",
+        (prov.get("salt_commitment") or "")[:10] if doc.get("salted") else "no",
+    ]
+
+
+def _markdown(columns: Sequence[str], rows: Iterable[list[str]]) -> str:
+    lines = ["| " + " | ".join(columns) + " |", "|" + "|".join("---" for _ in columns) + "|"]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+TOWN_COLUMNS = ("agent", "fidelity", "town", "scenes", "agents", "success %", *MULTI_COLUMNS)
+"""The columns of a multi-agent board's per-town table."""
+
+
+def _town_rows(entries: Sequence[dict], towns: Sequence[str]) -> list[list[str]]:
+    rows = []
+    for doc in entries:
+        by_town = doc["aggregates"].get("multi_by_town", {})
+        for town in [t for t in towns if t in by_town]:
+            f = by_town[town]
+            rows.append([f"`{doc['agent']}`", doc["fidelity"], town, str(f["scenes"]), str(f["agents"]),
+                         f"{f['agent_success_pct']:.1f}", *(_figure(f[k]) for k in MULTI_FIGURES)])
+    return rows
+
+
+def _multi_parts(spec, ranked: list[dict], partial: list[dict]) -> list[str]:
+    """The README sections of a multi-agent suite's board below its preamble."""
+    parts = [
+        f"Every scene (episode) holds {spec.agents} goal-directed vehicles, each with its own start, goal and "
+        "route, all driven by the evaluated policy; each has its own record. success %: of the agents (vehicles) "
+        "that reached their goal; agents in agent collision %: of the agents in a collision with another "
+        "goal-directed vehicle; agent pairs collided: such pairs, each pair once; other collisions: collision events "
+        "with the other road users (SUMO's traffic, pedestrians); red lights, wrong lane: events; timeouts: agents; "
+        "arrived / min: agents that reached their goal per minute of scene time (a scene lasts until its last "
+        "vehicle's episode ended); scenes: scored of the suite's. Ranked by success %, then driving score.\n"]
+    if not ranked:
+        parts.append("No complete entries yet.\n")
+    for fidelity in sorted({e["fidelity"] for e in ranked}):
+        group = sorted((e for e in ranked if e["fidelity"] == fidelity), key=_rank_key)
+        parts.append(f"## Fidelity: {fidelity}\n")
+        parts.append(_markdown(multi_header(spec.towns),
+                               (_multi_row(e, str(k), spec.towns) for k, e in enumerate(group, start=1))))
+    if partial:
+        parts.append("## Partial runs (not ranked)\n")
+        parts.append("Runs with missing scenes or sim errors, then subsets of the suite, listed by the scenes they "
+                     "cover (most first), not by score.\n")
+        parts.append(_markdown(multi_header(spec.towns),
+                               (_multi_row(e, "–", spec.towns) for e in sorted(partial, key=_partial_key))))
+    if ranked or partial:
+        ordered = [*sorted(ranked, key=lambda e: (e["fidelity"], _rank_key(e))), *sorted(partial, key=_partial_key)]
+        parts.append("## Per town\n")
+        parts.append(_markdown(TOWN_COLUMNS, _town_rows(ordered, spec.towns)))
+    return parts
+
+
 def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
-    """Regenerate ``<board>/<suite>/README.md`` from the suite's results files."""
+    """Regenerate ``<board>/<suite>/README.md`` from the suite's results files (a multi-agent suite's board
+    shows the scene figures, :func:`multi_header`)."""
     spec = get_suite(suite)
     entries = load_entries(board_dir, spec.name)
     ranked = [e for e in entries if e["complete"]]
@@ -284,9 +370,12 @@ def render_readme(board_dir: str | os.PathLike, suite: str) -> Path:
         "pedestrians and light phases took (an agent could not rebuild its episodes; the salt is in the results "
         "file, for `hbmp-bench leaderboard audit`), no for the public episodes.\n",
     ]
-    if not ranked:
+    if spec.agents > 1:
+        parts += _multi_parts(spec, ranked, partial)
+        partial = []
+    elif not ranked:
         parts.append("No complete entries yet.\n")
-    for fidelity in sorted({e["fidelity"] for e in ranked}):
+    for fidelity in sorted({e["fidelity"] for e in ranked} if spec.agents == 1 else ()):
         group = sorted((e for e in ranked if e["fidelity"] == fidelity), key=_rank_key)
         parts.append(f"## Fidelity: {fidelity}\n")
         parts.append(_table((_row(e, str(k), spec.tasks) for k, e in enumerate(group, start=1)), spec.tasks))

@@ -23,10 +23,17 @@ Views (``build_report``):
                    reached the goal (median, min, max): about 1 when route lengths are what a
                    car drives, since the goal is reached within a couple of metres.
     coverage       per set: episodes in the views, sim errors left out, agent errors.
-    paired         per pair of sets, on the episodes both scored (same suite, town, task and index):
+    paired         per pair of sets, on the episodes both scored (same suite, town, task, index and vehicle):
                    both succeeded, only the first, only the second, neither, the success difference
                    and the exact two-sided McNemar p on the episodes where they differ; whether a gap
                    between two agents is more than the luck of these episodes (not of training seeds).
+    multi          (multi-agent scenes only: records that name their vehicle) per (set, town) and over all
+                   towns: scenes, agents, % of agents that reached their goal, pairs of controlled agents
+                   that collided (each pair once), % of agents in such a collision, collision events with
+                   the other road users, red lights, wrong lane, off-road, timeouts, agent errors, and the
+                   throughput: agents arrived per minute of scene time (a scene lasts until its last
+                   vehicle's episode ended).
+    multi_scenes   (multi-agent scenes only) the same per scene.
 """
 
 from __future__ import annotations
@@ -47,7 +54,6 @@ from hbmp_bench.metrics.records import (
     DRIVING_SCORE_LB2_DEFINITION,
     SIM_ERROR,
     EpisodeRecord,
-    latest_per_key,
     read_records,
     record_driving_score_lb2,
 )
@@ -91,6 +97,13 @@ VIEW_LEGENDS: dict[str, str] = {
                  "completion %; only for results that hold scenario types.",
     "abilities": "Success % per ability: the episodes of its scenario types together (Bench2Drive's grouping); "
                  "only for results that hold scenario types.",
+    "multi": "Multi-agent scenes, per town: agents = goal-directed vehicles (one record each); agent_success_pct = "
+             "% of them that reached their goal; agent_collision_pairs = pairs of goal-directed vehicles that "
+             "collided with each other, each pair once; agents_in_agent_collision_pct = % of agents in such a "
+             "collision; other_collisions = collision EVENTS with other road users; red_light, wrong_lane, off_road "
+             "= events; timeouts, agent_errors = agents; throughput_per_min = agents arrived per minute of scene "
+             "time (a scene lasts until its last vehicle's episode ended).",
+    "multi_scenes": "The multi view per scene (town, episode index).",
 }
 """One-line meaning and units of each view of :func:`build_report`, printed above it."""
 
@@ -129,7 +142,7 @@ def load_results(paths: Iterable[str | os.PathLike]) -> pd.DataFrame:
 
             records = results_records(path)
         else:
-            records = latest_per_key(read_records(path))
+            records = latest_records(read_records(path))
         if not records:
             continue
         df = pd.DataFrame([r.to_dict() for r in records])
@@ -154,9 +167,18 @@ def label_result_sets(df: pd.DataFrame) -> pd.DataFrame:
     return df
 
 
+def latest_records(records: Iterable[EpisodeRecord]) -> list[EpisodeRecord]:
+    """One record per episode run and vehicle (``EpisodeRecord.key`` and ``vehicle``: a scene's N records are
+    N): the last one written wins (a rerun of a ``sim_error`` replaces it), in first-seen order."""
+    latest: dict[tuple, EpisodeRecord] = {}
+    for record in records:
+        latest[(*record.key, record.vehicle)] = record
+    return list(latest.values())
+
+
 def records_frame(records: Iterable[EpisodeRecord], label: str | None = None) -> pd.DataFrame:
     """A report frame from records in memory (``result_set`` = ``label`` or the agent)."""
-    df = pd.DataFrame([r.to_dict() for r in latest_per_key(records)])
+    df = pd.DataFrame([r.to_dict() for r in latest_records(records)])
     if df.empty:
         raise UserError("no records")
     df["source"] = ""
@@ -301,8 +323,9 @@ def coverage(df: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(rows).set_index("result_set")
 
 
-EPISODE_KEY = ("suite", "town", "task", "episode")
-"""The columns that name one episode of a suite (the same episode in every result set)."""
+EPISODE_KEY = ("suite", "town", "task", "episode", "vehicle")
+"""The columns that name one episode of a suite and its vehicle (the same in every result set; ``vehicle``
+is "" in a single-ego episode, a scene's goal-directed vehicle in a multi-agent one)."""
 
 
 def mcnemar_p(only_first: int, only_second: int) -> float:
@@ -322,7 +345,8 @@ def paired_comparison(df: pd.DataFrame) -> pd.DataFrame:
     significant digits).
     Empty with fewer than two sets or none sharing an episode."""
     df = scored(df)
-    success = {s: part.set_index(list(EPISODE_KEY))["success"].astype(bool) for s, part in df.groupby("result_set")}
+    key = [k for k in EPISODE_KEY if k in df]
+    success = {s: part.set_index(key)["success"].astype(bool) for s, part in df.groupby("result_set")}
     sets = _sets(df)
     rows = []
     for i, first in enumerate(sets):
@@ -405,7 +429,54 @@ def build_report(source: pd.DataFrame | Sequence[str | os.PathLike]) -> Report:
     scenarios = scenario_table(df)
     if not scenarios.empty:
         views.update(scenarios=scenarios, abilities=ability_table(df))
+    if "vehicle" in df and (df["vehicle"].astype(str) != "").any():
+        views.update(multi=multi_table(df), multi_scenes=multi_scene_table(df))
     return Report(views)
+
+
+SCENE_KEY = ("suite", "town", "task", "episode", "agent", "fidelity")
+"""The columns that name one scene run (its N vehicles' records share them)."""
+
+
+def _frame_records(part: pd.DataFrame) -> list[EpisodeRecord]:
+    names = set(EpisodeRecord.__dataclass_fields__)
+    return [EpisodeRecord(**{k: v for k, v in row.items() if k in names}) for row in part.to_dict(orient="records")]
+
+
+def _multi_row(group: pd.DataFrame) -> dict:
+    """The multi view's figures of a frame's rows (:func:`~hbmp_bench.metrics.summary.scene_summary` of the
+    scored ones) and the sim errors left out."""
+    from hbmp_bench.metrics.summary import scene_summary
+
+    return {**scene_summary(_frame_records(scored(group))),
+            "sim_errors": int((group["end_reason"] == SIM_ERROR).sum())}
+
+
+def multi_table(df: pd.DataFrame) -> pd.DataFrame:
+    """Per (result_set, town) and (result_set, ``all``): the multi-agent figures of the scenes
+    (:func:`~hbmp_bench.metrics.summary.scene_summary`; agents scored, sim errors left out). Only the records
+    that name their vehicle (a scene's)."""
+    df = df[df["vehicle"].astype(str) != ""]
+    rows = []
+    for result_set in _sets(df):
+        everything = df[df["result_set"] == result_set]
+        towns = [(town, everything[everything["town"] == town]) for town in _towns(everything)]
+        for town, group in [*towns, ("all", everything)]:
+            rows.append({"result_set": result_set, "town": town, **_multi_row(group)})
+    return pd.DataFrame(rows).set_index(["result_set", "town"]) if rows else pd.DataFrame()
+
+
+def multi_scene_table(df: pd.DataFrame) -> pd.DataFrame:
+    """The multi view per scene: index (result_set, town, task, episode), ordered so."""
+    df = df[df["vehicle"].astype(str) != ""]
+    rows = []
+    for result_set in _sets(df):
+        mine = df[df["result_set"] == result_set]
+        for (town, task, episode), group in mine.groupby(["town", "task", "episode"], sort=True):
+            row = _multi_row(group)
+            del row["scenes"]
+            rows.append({"result_set": result_set, "town": town, "task": task, "episode": int(episode), **row})
+    return pd.DataFrame(rows).set_index(["result_set", "town", "task", "episode"]) if rows else pd.DataFrame()
 
 
 def flat_frame(df: pd.DataFrame) -> pd.DataFrame:
@@ -513,9 +584,11 @@ def scores(suite: str, records: Sequence[EpisodeRecord], *, towns: Sequence[str]
            episodes: Sequence[int], agent: str = "", aggregates: bool = True) -> dict:
     """What a results file derives from its episode records and its selection of ``suite``:
     ``complete``, ``subset``, ``selection``, ``expected_episodes``, ``sim_errors``, ``summary`` and
-    ``aggregates`` (the report views; only ``success_pct_by_task`` when ``aggregates`` is False,
-    which is what the board's tables show). One function for ``submit``, ``add`` and ``render``,
-    so a file's claims are checked by recomputing them (``results_check``)."""
+    ``aggregates`` (the report views; only ``success_pct_by_task`` and, for a multi-agent suite,
+    ``multi_by_town`` when ``aggregates`` is False: what the board's tables show). One function for ``submit``,
+    ``add`` and ``render``, so a file's claims are checked by recomputing them (``results_check``).
+    ``expected_episodes`` counts records: one per episode, a multi-agent suite's one per vehicle of each
+    (``Suite.agents``), whose summary has the scene figures too (``summary.scene_summary``)."""
     from hbmp_bench.metrics.summary import summarize
     from hbmp_bench.scenarios import get_suite
 
@@ -524,7 +597,7 @@ def scores(suite: str, records: Sequence[EpisodeRecord], *, towns: Sequence[str]
             and list(episodes) == list(range(spec.episodes_per_task)))
     from hbmp_bench.scenarios import selection_size
 
-    expected = selection_size(spec.name, towns, tasks, episodes)
+    expected = selection_size(spec.name, towns, tasks, episodes) * spec.agents
     sim_errors = sum(r.end_reason == SIM_ERROR for r in records)
     frame = records_frame(records, label=agent) if records else None
     views = {}
@@ -539,6 +612,12 @@ def scores(suite: str, records: Sequence[EpisodeRecord], *, towns: Sequence[str]
     events = sum(r.collisions + r.wrong_lane + r.off_road + r.red_light for r in scored_records)
     summary["success_pct"] = round(100.0 * summary["success_rate"], 2)
     summary["km_per_infraction"] = round(km / events, 3) if events else None
+    if spec.agents > 1:
+        from hbmp_bench.metrics.summary import scene_summary
+
+        summary.update({k: v for k, v in scene_summary(scored_records).items() if k not in summary})
+        views["multi_by_town"] = {town: scene_summary([r for r in scored_records if r.town == town])
+                                  for town in towns if any(r.town == town for r in scored_records)}
     return {
         "complete": full and len(records) == expected and sim_errors == 0,
         "subset": not full,

@@ -40,6 +40,58 @@ def summarize(records: Iterable[EpisodeRecord]) -> dict:
     }
 
 
+def agent_contacts(record: EpisodeRecord) -> int:
+    """How many other goal-directed vehicles of its scene a record's vehicle collided with (``agent_collisions``)."""
+    return len(record.agent_collisions.split())
+
+
+def other_collisions(record: EpisodeRecord) -> int:
+    """A record's collision events with road users other than the scene's goal-directed vehicles (SUMO's
+    vehicles, pedestrians, obstacles): its collisions less those with controlled agents, which
+    ``collision_vehicle`` counts too (``EpisodeRecord.agent_collisions``)."""
+    return max(record.collisions - agent_contacts(record), 0)
+
+
+def scene_length_s(records: Iterable[EpisodeRecord]) -> float:
+    """How long a scene ran [s]: until its last goal-directed vehicle's episode ended (the longest
+    ``duration_s`` of its records; every vehicle starts with the scene)."""
+    return max((r.duration_s for r in records), default=0.0)
+
+
+def scene_summary(records: Iterable[EpisodeRecord]) -> dict:
+    """The multi-agent figures of scene records (one per goal-directed vehicle; the scored ones): ``scenes``,
+    ``agents``, ``agent_success_pct`` (% of agents that reached their goal), ``agent_collision_pairs`` (pairs of
+    controlled agents that collided, each pair once), ``agents_in_agent_collision_pct`` (% of agents in a
+    collision with another controlled agent), ``other_collisions`` (collision events with the other road
+    users), ``red_light`` / ``wrong_lane`` / ``off_road`` (events), ``timeouts`` (agents), ``agent_errors``
+    (agents), ``scene_minutes`` (the scenes' time, :func:`scene_length_s`, summed [min]) and
+    ``throughput_per_min`` (agents arrived per minute of scene time)."""
+    from hbmp_bench.metrics.records import AGENT_ERROR, agent_collision_pairs
+
+    records = list(records)
+    scenes: dict[tuple, list[EpisodeRecord]] = {}
+    for r in records:
+        scenes.setdefault((r.suite, r.town, r.task, r.episode, r.agent, r.fidelity), []).append(r)
+    minutes = sum(scene_length_s(rows) for rows in scenes.values()) / 60.0
+    arrived = sum(r.success for r in records)
+    n = len(records)
+    return {
+        "scenes": len(scenes),
+        "agents": n,
+        "agent_success_pct": round(100.0 * arrived / n, 2) if n else 0.0,
+        "agent_collision_pairs": len(agent_collision_pairs(records)),
+        "agents_in_agent_collision_pct": round(100.0 * sum(agent_contacts(r) > 0 for r in records) / n, 2) if n else 0.0,
+        "other_collisions": sum(other_collisions(r) for r in records),
+        "red_light": sum(r.red_light for r in records),
+        "wrong_lane": sum(r.wrong_lane for r in records),
+        "off_road": sum(r.off_road for r in records),
+        "timeouts": sum(bool(r.timeout) for r in records),
+        "agent_errors": sum(r.end_reason == AGENT_ERROR for r in records),
+        "scene_minutes": round(minutes, 3),
+        "throughput_per_min": round(arrived / minutes, 3) if minutes > 0 else 0.0,
+    }
+
+
 SUMMARY_LEGEND: dict[str, str] = {
     "episodes": "episodes run",
     "success_rate": "fraction of episodes that reached the goal (0-1)",
@@ -54,6 +106,16 @@ SUMMARY_LEGEND: dict[str, str] = {
     "mean_driving_score": "mean over episodes of the " + DRIVING_SCORE_DEFINITION,
     "decisions": "behavior decisions taken, all episodes",
     "distance_km": "km driven, all episodes",
+    "scenes": "multi-agent episodes (scenes) run",
+    "agents": "goal-directed vehicles' episodes (one record each), all scenes",
+    "agent_success_pct": "% of the goal-directed vehicles that reached their goal",
+    "agent_collision_pairs": "pairs of goal-directed vehicles that collided with each other (each pair once)",
+    "agents_in_agent_collision_pct": "% of the goal-directed vehicles in a collision with another goal-directed one",
+    "other_collisions": "collision events of goal-directed vehicles with other road users (SUMO's traffic, "
+                        "pedestrians, obstacles)",
+    "agent_errors": "goal-directed vehicles whose scene the agent broke (raised, hung, bad reply)",
+    "scene_minutes": "minutes of scene time (each scene until its last vehicle's episode ended), summed",
+    "throughput_per_min": "goal-directed vehicles arrived per minute of scene time",
 }
 """What each :func:`summarize` key means, with its unit (the legend of printed summaries)."""
 

@@ -150,7 +150,8 @@ def test_printed_views_say_what_they_count(two_sets, tmp_path):
     from hbmp_bench.metrics.report import NO_EVENT, VIEW_LEGENDS, readable
 
     report = build_report(two_sets)
-    assert set(VIEW_LEGENDS) - set(report.views) == {"scenarios", "abilities"}  # those only for scenario types
+    # scenarios and abilities only for scenario types, multi and multi_scenes only for multi-agent scenes
+    assert set(VIEW_LEGENDS) - set(report.views) == {"scenarios", "abilities", "multi", "multi_scenes"}
     assert "EPISODES" in VIEW_LEGENDS["failures"] and "EVENT" in VIEW_LEGENDS["km_between"]
     assert DRIVING_SCORE_DEFINITION in VIEW_LEGENDS["driving"]
     assert all(f"{factor:g} per" in DRIVING_SCORE_DEFINITION for factor in PENALTIES.values())
@@ -165,10 +166,10 @@ def test_printed_views_say_what_they_count(two_sets, tmp_path):
 
 
 def test_summary_lines_explain_every_summary_key():
-    from hbmp_bench.metrics.summary import SUMMARY_LEGEND, summarize, summary_lines
+    from hbmp_bench.metrics.summary import SUMMARY_LEGEND, scene_summary, summarize, summary_lines
 
     summary = summarize([rec(red_light=2), rec(episode=1)])
-    assert set(summary) == set(SUMMARY_LEGEND)
+    assert set(summary) | set(scene_summary([rec()])) == set(SUMMARY_LEGEND)
     lines = summary_lines({"records": "x.jsonl", **summary})
     assert lines[0].split() == ["records", "x.jsonl"]
     red = next(line for line in lines if line.startswith("red_light"))
