@@ -21,6 +21,7 @@ import numpy as np
 
 from hbmp_bench.envs.config import env_configs
 from hbmp_bench.envs.world import EGO_ID
+from hbmp_bench.errors import ConfigError
 
 
 def keyword_signature(cls: type, *leading: inspect.Parameter) -> inspect.Signature:
@@ -42,6 +43,10 @@ class EgoView(gym.Env):
     metadata = {"render_modes": ["rgb_array", "rgb_array_list"], "render_fps": 10}
 
     def __init__(self, parallel):
+        if len(parallel.goal_agents) > 1:
+            raise ConfigError(f"{parallel.scenario.suite} episodes have {len(parallel.goal_agents)} goal-directed "
+                              "vehicles and a single-ego env drives one: use traffic_v0.parallel_env (one agent each) "
+                              "or hbmp_bench.envs.scene_env.SceneEnv (all in one call)")
         self.parallel = parallel
         self.render_mode = parallel.render_mode
         self.action_space = parallel.action_space(EGO_ID)

@@ -5,9 +5,10 @@
 (:mod:`hbmp_bench.envs.ecosystem`), with the two things RLlib's wrapper gets wrong for this env:
 
 - ``__all__``: RLlib's wrapper sets ``terminateds["__all__"] = all(terminateds.values())``; when the
-  ego reaches its goal it is terminated and the others are truncated, so neither ``all`` holds and
-  RLlib would step a finished episode. Here the episode is over when no agent is left:
-  ``terminateds["__all__"]`` when the ego was terminated, else ``truncateds["__all__"]``.
+  last goal-directed agent reaches its goal it is terminated and the circulating ones are truncated, so
+  neither ``all`` holds and RLlib would step a finished episode. Here the episode is over when no agent
+  is left: ``terminateds["__all__"]`` when a goal-directed agent (``ego``, ``ego1`` ...) was terminated
+  at that step, else ``truncateds["__all__"]``.
 - ``render()``: RLlib's wrapper calls ``par_env.render(mode)``; PettingZoo's ``render()`` takes no
   argument.
 
@@ -22,7 +23,6 @@ from __future__ import annotations
 from typing import Any
 
 from hbmp_bench.envs.ecosystem import DecisionsOnly, FlatObservations
-from hbmp_bench.envs.world import EGO_ID
 
 
 def rllib_env(config: dict[str, Any] | None = None):
@@ -43,9 +43,9 @@ def rllib_env(config: dict[str, Any] | None = None):
         def step(self, action_dict):
             obs, rewards, terms, truncs, infos = self.par_env.step(action_dict)
             over = not self.par_env.agents
-            ego_terminated = bool(terms.get(EGO_ID))
-            terms["__all__"] = over and ego_terminated
-            truncs["__all__"] = over and not ego_terminated
+            goal_terminated = any(terms.get(a) for a in self.par_env.unwrapped.goal_agents)
+            terms["__all__"] = over and goal_terminated
+            truncs["__all__"] = over and not goal_terminated
             return obs, rewards, terms, truncs, infos
 
         def render(self):

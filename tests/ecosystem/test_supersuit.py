@@ -44,3 +44,28 @@ def test_supersuits_vector_env_resets_every_slot_together():
         vec.close()
     assert np.array(ends).sum(axis=1).tolist() == [0] * (CYCLES - 1) + [6] + [0] * (CYCLES - 1) + [6]
     assert np.isfinite(obs).all()
+
+
+def make_goal_env():
+    """Three goal-directed agents (``ego``, ``ego1``, ``ego2``: each its own start, goal and route) and no
+    circulating one."""
+    return BlackDeath(FlatObservations(traffic_v0.parallel_env(
+        town="Town02", task="NavigationDynamic", suite="hbmp", episode_index=0, agents=3, controlled="none",
+        fidelity="event", max_cycles=CYCLES)))
+
+
+def test_goal_directed_agents_vectorise_and_end_together():
+    vec = ss.concat_vec_envs_v1(ss.pettingzoo_env_to_vec_env_v1(make_goal_env()), 2, num_cpus=0,
+                                base_class="gymnasium")
+    ends = []
+    try:
+        obs, _ = vec.reset(seed=0)
+        assert obs.shape == (6, *vec.observation_space.shape)
+        for _ in range(CYCLES):
+            obs, rewards, terms, truncs, infos = vec.step(np.array([vec.action_space.sample() for _ in range(6)]))
+            ends.append(truncs | terms)
+            assert np.isfinite(rewards).all()
+    finally:
+        vec.close()
+    assert np.array(ends).sum(axis=1).tolist() == [0] * (CYCLES - 1) + [6]
+    assert np.isfinite(obs).all()
