@@ -21,6 +21,12 @@ each town, env reset seed 0):
   behind a barrier), total decisions/s; the workers also report their peak memory (``ru_maxrss``).
   The same with 1 and 2 Ray actors on a local Ray instance (``ray_scaling``; skipped without the
   ``ray`` extra): the training backend's workers.
+- **multi-agent**: ``traffic_v0.parallel_env(agents=N, controlled="none")`` on ``agents_town`` (dense traffic)
+  with N = ``agent_counts`` goal-directed agents (``ego``, ``ego1`` ...) in both fidelities, the learned
+  ``agents_policy`` deciding for every deciding agent in one batched forward pass (``act_batch``), for
+  ``agents_seconds`` of ``env.step`` + policy time (resets excluded; the scene restarts when every agent's
+  episode has ended). Agent-decisions/s, ms per agent-decision and the ratio to 1 agent
+  (:func:`measure_multi_agent`); :func:`write_plot` draws decisions/s against agents.
 - **import**: ``import hbmp_bench`` in a fresh interpreter, best of ``import_repeats`` (``import_s``).
 
 The planner's kernels, the detectors' lane lookup and M_t's rasteriser are compiled (or loaded from numba's
@@ -30,7 +36,8 @@ would otherwise include the compile.
 The targets (:class:`Targets`) are those of the speed issue: continuous ≥ 0.2× raw, event ≥ 0.35×
 raw, continuous decisions/s ≥ 1.5× highway-fast-v0 (event: ≥ 10×, from the throughput issue), a
 planner call ≤ 1.5 raw SUMO steps (mean), two workers ≥ 1.85× one, two Ray actors ≥ 1.7× one,
-peak memory per env process ≤ 450 MB, ``import hbmp_bench`` ≤ 0.3 s.
+peak memory per env process ≤ 450 MB, ``import hbmp_bench`` ≤ 0.3 s; and those of the multi-agent issue
+("every vehicle a learner"): agent-decisions/s with 16 agents ≥ 8× with 1 in event fidelity, ≥ 4× in continuous.
 """
 
 from __future__ import annotations
@@ -80,6 +87,8 @@ class Targets:
         two_ray_actors_to_one: decisions/s of 2 Ray actors ÷ 1 actor, at least.
         peak_rss_mb: peak resident memory of a scaling worker process [MB], at most.
         import_s: ``import hbmp_bench`` in a fresh interpreter [s], at most.
+        event_agents_16_to_1: event fidelity, agent-decisions/s with 16 goal-directed agents ÷ with 1, at least.
+        continuous_agents_16_to_1: the same in continuous fidelity, at least.
     """
 
     continuous_to_raw: float = 0.2
@@ -91,6 +100,8 @@ class Targets:
     two_ray_actors_to_one: float = 1.7
     peak_rss_mb: float = 450.0
     import_s: float = 0.3
+    event_agents_16_to_1: float = 8.0
+    continuous_agents_16_to_1: float = 4.0
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
@@ -114,6 +125,10 @@ class BenchConfig:
         scaling_town / scaling_fidelity: the env the workers run (random actions).
         ray_workers: Ray actor counts of the same measurement on a local Ray instance (empty skips it).
         import_repeats: fresh interpreters that time ``import hbmp_bench``; the best counts (0 skips it).
+        agent_counts: goal-directed agents of the multi-agent runs (empty skips them).
+        agents_town: their town (dense traffic, so that there is room for every start).
+        agents_seconds: env step + policy time of each (fidelity, agent count) run [s].
+        agents_policy: the learned agent that decides for all of them (one batched forward pass).
         targets: the pass marks.
     """
 
@@ -130,6 +145,10 @@ class BenchConfig:
     scaling_fidelity: str = "continuous"
     ray_workers: tuple[int, ...] = (1, 2)
     import_repeats: int = 3
+    agent_counts: tuple[int, ...] = (1, 4, 16, 32)
+    agents_town: str = "Town03"
+    agents_seconds: float = 15.0
+    agents_policy: str = "il"
     targets: Targets = Targets()
 
     def __post_init__(self):
@@ -147,6 +166,10 @@ class BenchConfig:
             raise ConfigError(f"scaling_fidelity must be one of {FIDELITIES}, got {self.scaling_fidelity!r}")
         if self.import_repeats < 0:
             raise ConfigError(f"import_repeats must be >= 0, got {self.import_repeats}")
+        if any(isinstance(n, bool) or not isinstance(n, int) or n < 1 for n in self.agent_counts):
+            raise ConfigError(f"agent_counts must be ints >= 1, got {self.agent_counts}")
+        if self.agents_seconds <= 0:
+            raise ConfigError(f"agents_seconds must be > 0, got {self.agents_seconds}")
         if not isinstance(self.targets, Targets):
             raise ConfigError(f"targets must be a Targets, got {type(self.targets).__name__}")
 
@@ -154,7 +177,7 @@ class BenchConfig:
     def quick(cls) -> "BenchConfig":
         """A smoke run of every part (seconds, not minutes; the numbers mean little)."""
         return cls(towns=("Town01",), raw_steps=200, env_seconds=1.5, highway_seconds=0.5,
-                   scaling_workers=(1,), scaling_seconds=1.0, ray_workers=(1,))
+                   scaling_workers=(1,), scaling_seconds=1.0, ray_workers=(1,), agent_counts=(1, 4), agents_seconds=1.5)
 
 
 # ----------------------------------------------------------------- helpers
@@ -340,6 +363,52 @@ def measure_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float | Non
             "latency": latency, "time_share": share}
 
 
+def measure_multi_agent(cfg: BenchConfig, fidelity: str, agents: int) -> dict:
+    """``agents`` goal-directed agents on ``cfg.agents_town`` (dense) in ``fidelity``, the learned
+    ``cfg.agents_policy`` deciding for all deciding agents in one forward pass, for ``cfg.agents_seconds`` of
+    env step + policy time: agent-decisions/s and ms per agent-decision (policy included, resets excluded)."""
+    import torch
+
+    from hbmp_bench.agents import agent_env_kwargs, load_agent
+    from hbmp_bench.envs import traffic_v0
+
+    warm_up_s = warm_up_kernels()
+    agent = load_agent(cfg.agents_policy)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # one env process per core, as the scaling workers
+    env = traffic_v0.parallel_env(town=cfg.agents_town, task=cfg.task, suite=cfg.suite, episode_index=cfg.episode_index,
+                                  density="dense", agents=agents, controlled="none", fidelity=fidelity,
+                                  **agent_env_kwargs(agent))
+    decisions = steps = scenes = 0
+    env_s = policy_s = sim_s = 0.0
+    try:
+        obs, infos = env.reset(seed=0)
+        while env_s + policy_s < cfg.agents_seconds:
+            deciding = [a for a in env.agents if infos[a]["decision_required"]]
+            t0 = time.perf_counter()
+            actions = agent.act_batch({a: obs[a] for a in deciding}, {a: infos[a] for a in deciding})
+            t1 = time.perf_counter()
+            sim_before = env.world.sim.time
+            obs, _, _, _, infos = env.step(actions)
+            t2 = time.perf_counter()
+            policy_s, env_s = policy_s + t1 - t0, env_s + t2 - t1
+            sim_s += env.world.sim.time - sim_before
+            decisions, steps = decisions + len(deciding), steps + 1
+            if not env.agents:
+                scenes += 1
+                obs, infos = env.reset(seed=scenes)
+    finally:
+        env.close()
+        torch.set_num_threads(threads)
+    seconds = env_s + policy_s
+    return {"town": cfg.agents_town, "fidelity": fidelity, "agents": agents, "policy": cfg.agents_policy,
+            "agent_decisions": decisions, "env_steps": steps, "scenes_finished": scenes,
+            "sim_steps": int(round(sim_s / env.config.step_length_s)), "seconds": round(seconds, 3),
+            "env_seconds": round(env_s, 3), "policy_seconds": round(policy_s, 3), "warm_up_s": round(warm_up_s, 4),
+            "agent_decisions_per_s": round(decisions / seconds, 2),
+            "ms_per_agent_decision": round(1e3 * seconds / max(decisions, 1), 3)}
+
+
 def measure_highway(env_id: str, seconds: float, seed: int = 0) -> dict:
     """highway-env ``env_id`` with random actions for ``seconds`` of stepping: decisions/s, sim steps/s."""
     import gymnasium as gym
@@ -490,14 +559,20 @@ def target_checks(result: dict, targets: Targets = Targets()) -> list[dict]:
             targets.peak_rss_mb, op="<=")
     if result.get("import"):
         add("import hbmp_bench [s]", result["import"]["import_s"], targets.import_s, op="<=")
+    for fidelity in FIDELITIES:
+        rows = {r["agents"]: r for r in result.get("multi_agent", []) if r["fidelity"] == fidelity}
+        if 1 in rows and 16 in rows:
+            add(f"{fidelity} agent-decisions/s 16 agents / 1", rows[16]["agent_decisions_per_s"]
+                / rows[1]["agent_decisions_per_s"], getattr(targets, f"{fidelity}_agents_16_to_1"))
     return checks
 
 
 # ------------------------------------------------------------------ driver
 def _jobs(cfg: BenchConfig) -> tuple[list[tuple[str, str | None, Any]], str, str]:
-    """(kind, town, what) of every measurement ``cfg`` asks for, in the order they run; and why highway-env and
-    Ray are skipped ("" where they are not)."""
+    """(kind, town, what) of every measurement ``cfg`` asks for, in the order they run (``agents`` jobs: (kind,
+    fidelity, agent count)); and why highway-env and Ray are skipped ("" where they are not)."""
     jobs = [("raw", t, None) for t in cfg.towns] + [("env", t, f) for t in cfg.towns for f in FIDELITIES]
+    jobs += [("agents", f, n) for f in FIDELITIES for n in cfg.agent_counts]
     highway_missing = _missing("highway_env") if cfg.highway_seconds > 0 else ""
     jobs += [("highway", None, e) for e in (HIGHWAY_ENVS if cfg.highway_seconds > 0 and not highway_missing else ())]
     jobs += [("scaling", None, n) for n in cfg.scaling_workers]
@@ -513,6 +588,8 @@ def _measure(cfg: BenchConfig, kind: str, town: str | None, what: Any, result: d
         result["towns"][town]["raw_sumo"] = measure_raw_sumo(cfg, town)
     elif kind == "env":
         result["towns"][town][what] = measure_env(cfg, town, what)
+    elif kind == "agents":
+        result["multi_agent"].append(measure_multi_agent(cfg, town, what))
     elif kind == "highway":
         result["highway_env"][what] = measure_highway(what, cfg.highway_seconds)
     elif kind == "import":
@@ -528,7 +605,8 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
     from tqdm import tqdm
 
     jobs, highway_missing, ray_missing = _jobs(cfg)
-    measured = {"towns": {t: {} for t in cfg.towns}, "highway_env": {}, "scaling": [], "ray_scaling": [], "import": {}}
+    measured = {"towns": {t: {} for t in cfg.towns}, "highway_env": {}, "scaling": [], "ray_scaling": [], "import": {},
+                "multi_agent": []}
     started = time.perf_counter()
     with tqdm(jobs, unit="run", disable=not progress, file=sys.stderr) as bar:
         for kind, town, what in bar:
@@ -547,6 +625,7 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
         "ray_scaling": measured["ray_scaling"],
         "ray_skipped": ray_missing,
         "import": measured["import"],
+        "multi_agent": measured["multi_agent"],
         "bench_process_peak_rss_mb": _peak_rss_mb(),
         "wall_s": round(time.perf_counter() - started, 1),
     }
@@ -555,6 +634,9 @@ def run_benchmark(cfg: BenchConfig, progress: bool = True) -> dict:
         for f in FIDELITIES:
             row[f]["ratio_to_raw"] = round(row[f]["sim_steps_per_s"] / raw["steps_per_s"], 3)
             row[f]["cpu_ratio_to_raw"] = round(row[f]["sim_steps_per_cpu_s"] / raw["steps_per_cpu_s"], 3)
+    for row in result["multi_agent"]:
+        one = next((r for r in result["multi_agent"] if r["fidelity"] == row["fidelity"] and r["agents"] == 1), None)
+        row["ratio_to_1"] = round(row["agent_decisions_per_s"] / one["agent_decisions_per_s"], 3) if one else None
     result["targets"] = target_checks(result, cfg.targets)
     return result
 
@@ -587,6 +669,15 @@ def format_table(result: dict) -> str:
     if result.get("import"):
         lines.append(f"{'import hbmp_bench (fresh interpreter, best of ' + str(len(result['import']['runs_s'])) + ')':44s} "
                      f"{result['import']['import_s']:12.3f} s")
+    if result.get("multi_agent"):
+        first = result["multi_agent"][0]
+        lines += ["", f"multi-agent: {first['town']} dense, goal-directed agents, {first['policy']} deciding "
+                      "(one batched forward pass)",
+                  f"{'fidelity':12s} {'agents':>6s} {'decisions/s':>12s} {'ms/decision':>12s} {'x 1 agent':>10s}"]
+        for r in result["multi_agent"]:
+            ratio = f"{r['ratio_to_1']:10.2f}" if r.get("ratio_to_1") is not None else f"{'':>10s}"
+            lines.append(f"{r['fidelity']:12s} {r['agents']:6d} {r['agent_decisions_per_s']:12.1f} "
+                         f"{r['ms_per_agent_decision']:12.3f} {ratio}")
     lines += ["", f"{'latency [ms]':44s} {'median':>12s} {'p95':>12s} {'n':>7s}"]
     for town, row in result["towns"].items():
         for f in FIDELITIES:
@@ -660,6 +751,45 @@ def profile_env(cfg: BenchConfig, town: str, fidelity: str, seconds: float, top:
     return step_breakdown(row, raw) + "\n" + out.getvalue()
 
 
+def write_plot(result: dict, path: str | Path) -> Path:
+    """Agent-decisions/s against goal-directed agents, one line per fidelity, from a result's ``multi_agent``
+    rows (log-log, with the line of linear scaling from 1 agent dashed): an SVG (or any format matplotlib
+    writes, by the file's suffix)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = result.get("multi_agent", [])
+    if not rows:
+        raise ValueError("the result has no multi-agent rows (agent_counts was empty)")
+    fig, ax = plt.subplots(figsize=(5.6, 3.6))
+    for fidelity, color in zip(FIDELITIES, ("tab:blue", "tab:orange")):
+        mine = sorted((r for r in rows if r["fidelity"] == fidelity), key=lambda r: r["agents"])
+        if not mine:
+            continue
+        n = [r["agents"] for r in mine]
+        ax.plot(n, [r["agent_decisions_per_s"] for r in mine], "o-", color=color, label=f"{fidelity}")
+        one = next((r for r in mine if r["agents"] == 1), None)
+        if one:
+            ax.plot(n, [one["agent_decisions_per_s"] * k for k in n], "--", color=color, alpha=0.35, lw=1)
+    ax.set_xscale("log", base=2)
+    ax.set_yscale("log")
+    ax.set_xticks(sorted({r["agents"] for r in rows}), [str(k) for k in sorted({r["agents"] for r in rows})])
+    ax.set_xlabel("goal-directed agents in the scene")
+    ax.set_ylabel("agent-decisions / s")
+    first = rows[0]
+    ax.set_title(f"{first['town']} dense, {first['policy']} deciding (batched); dashed: linear", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, metadata={"Date": None} if path.suffix == ".svg" else None)
+    plt.close(fig)
+    return path
+
+
 # --------------------------------------------------------------------- CLI
 def _cmd_bench(args: argparse.Namespace) -> int:
     cfg = BenchConfig.quick() if args.quick else BenchConfig()
@@ -669,6 +799,8 @@ def _cmd_bench(args: argparse.Namespace) -> int:
     result = run_benchmark(cfg, progress=not args.json)
     if args.out:
         write_json(result, args.out)
+    if args.plot:
+        write_plot(result, args.plot)
     print(json.dumps(result, indent=2) if args.json else format_table(result))
     return exit_code(result, args.check)
 
@@ -684,6 +816,7 @@ def add_commands(subparsers) -> None:
     p.add_argument("--quick", action="store_true", help="a few seconds per part: checks that everything runs")
     p.add_argument("--check", action="store_true", help="exit 1 when a target fails (without it: 0 after printing)")
     p.add_argument("--out", default=None, help="also write the JSON result to this file")
+    p.add_argument("--plot", default=None, help="also draw agent-decisions/s against agents to this file (.svg, .png)")
     p.add_argument("--profile", type=float, default=0.0, metavar="SECONDS",
                    help="instead: time the parts of the env's step against raw SUMO and cProfile it for SECONDS; "
                         "print both")

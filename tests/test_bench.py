@@ -49,6 +49,15 @@ def test_bench_quick_writes_complete_json(tmp_path, capsys):
     for c in written["targets"]:
         assert c["passed"] == (c["value"] >= c["target"] if c["op"] == ">=" else c["value"] <= c["target"])
     assert "targets:" in format_table(written) and "import hbmp_bench" in format_table(written)
+    rows = {(r["fidelity"], r["agents"]): r for r in written["multi_agent"]}
+    assert set(rows) == {(f, n) for f in ("event", "continuous") for n in BenchConfig.quick().agent_counts}
+    for (fidelity, n), r in rows.items():
+        assert r["agent_decisions"] > 0 and r["seconds"] > 0 and r["policy"] == "il"
+        assert r["ratio_to_1"] == pytest.approx(r["agent_decisions_per_s"] / rows[fidelity, 1]["agent_decisions_per_s"],
+                                                abs=1e-3)
+    assert rows["event", 4]["agent_decisions"] > rows["event", 4]["env_steps"]  # several agents decide per step
+    assert rows["event", 1]["sim_steps"] == rows["event", 1]["agent_decisions"]
+    assert "multi-agent" in format_table(written)
 
 
 def test_bench_config_rejects_bad_values():
@@ -62,6 +71,30 @@ def test_bench_config_rejects_bad_values():
         BenchConfig(import_repeats=-1)
     with pytest.raises(ValueError):
         Targets(import_s=float("nan"))
+    with pytest.raises(ValueError):
+        BenchConfig(agent_counts=(0, 4))
+    with pytest.raises(ValueError):
+        BenchConfig(agents_seconds=0.0)
+
+
+def _agent_rows(event=(100.0, 850.0), continuous=(10.0, 35.0)):
+    return [{"fidelity": f, "agents": n, "agent_decisions_per_s": v, "town": "Town03", "policy": "il",
+             "ms_per_agent_decision": 1e3 / v, "ratio_to_1": v / pair[0]}
+            for f, pair in (("event", event), ("continuous", continuous)) for n, v in zip((1, 16), pair)]
+
+
+def test_multi_agent_targets_and_plot(tmp_path):
+    checks = {c["name"]: c for c in target_checks({**_result(), "multi_agent": _agent_rows()})}
+    assert checks["event agent-decisions/s 16 agents / 1"]["value"] == pytest.approx(8.5)
+    assert checks["event agent-decisions/s 16 agents / 1"]["passed"]
+    assert not checks["continuous agent-decisions/s 16 agents / 1"]["passed"]  # 3.5 < 4
+    strict = {c["name"]: c["passed"] for c in target_checks({**_result(), "multi_agent": _agent_rows()},
+                                                            Targets(event_agents_16_to_1=9.0))}
+    assert not strict["event agent-decisions/s 16 agents / 1"]
+    path = bench.write_plot({"multi_agent": _agent_rows()}, tmp_path / "agents.svg")
+    assert path.read_text().lstrip().startswith("<?xml") and "agent-decisions" in path.read_text()
+    with pytest.raises(ValueError):
+        bench.write_plot({"multi_agent": []}, tmp_path / "none.svg")
 
 
 def _result(import_s=0.1, continuous=500.0, event=900.0, raw=1000.0):
@@ -108,7 +141,7 @@ def test_exit_code_is_one_only_with_check_and_a_failed_target():
 @pytest.mark.slow
 def test_bench_check_exits_1_on_a_failed_target_and_0_without_check(monkeypatch, capsys):
     tiny = BenchConfig(towns=("Town01",), raw_steps=20, env_seconds=0.2, highway_seconds=0.0, scaling_workers=(),
-                       ray_workers=(), import_repeats=1, targets=Targets(import_s=0.0))  # no import takes 0 s: that target fails
+                       ray_workers=(), import_repeats=1, agent_counts=(), targets=Targets(import_s=0.0))  # no import takes 0 s: that target fails
     monkeypatch.setattr(BenchConfig, "quick", classmethod(lambda cls: tiny))
     assert main(["bench", "--quick", "--json"]) == 0
     result = json.loads(capsys.readouterr().out)
