@@ -3,7 +3,7 @@
 A checkpoint is a dict:
 
     format               CHECKPOINT_FORMAT
-    kind                 "il", "hbmp", "hbmp-s" or "flat"
+    kind                 "il", "hbmp", "hbmp-s", "flat" or "flat-il" (DAgger on the flat baseline's controls)
     model                {"actor": rsl-rl model config, "critic": ..., "obs_shapes": {group: [dims]},
                           "obs_groups": {"actor": [...], "critic": [...]}, "num_actions": int,
                           "action_space": "discrete" | "box", "env": {env id and options}}
@@ -32,7 +32,7 @@ from typing import Any
 from hbmp_bench.errors import UserError
 
 CHECKPOINT_FORMAT = "hbmp_bench.checkpoint.v1"
-KINDS = ("il", "hbmp", "hbmp-s", "flat")
+KINDS = ("il", "hbmp", "hbmp-s", "flat", "flat-il")
 PLAIN_TYPES = (str, int, float, bool, type(None))
 NETWORK_CLASSES = (
     "hbmp_bench.policies.networks:BehaviorNetwork",

@@ -1,10 +1,11 @@
-"""``hbmp-bench train {il,hbmp,hbmp-s,flat}`` and ``hbmp-bench curves``.
+"""``hbmp-bench train {il,hbmp,hbmp-s,flat,flat-il}`` and ``hbmp-bench curves``.
 
     hbmp-bench train il     --episodes N --workers W --seed S --out DIR   DAgger, event fidelity (the paper's;
                                                                           --fidelity continuous: the shipped il)
     hbmp-bench train hbmp   ... [--init il|CKPT|none]                     PPO, r_k + r_T, continuous fidelity
     hbmp-bench train hbmp-s ...                                           PPO, r_T only
-    hbmp-bench train flat   ...                                           PPO on acceleration and steering
+    hbmp-bench train flat   ... [--init flat-il|CKPT|none]                PPO on acceleration and steering
+    hbmp-bench train flat-il ...                                          DAgger on the expert's controls (CIL)
     hbmp-bench curves DIR [DIR ...] --labels ... --out fig.png             r_T and r_T + Σr_t of several runs
 
 Ablations: ``--init none`` (random instead of IL initialisation), ``--road-profile metric`` (R_t with the stop
@@ -24,10 +25,15 @@ from hbmp_bench.errors import Interrupted, UserError
 from hbmp_bench.locks import Busy, exclusive_lock
 from hbmp_bench.policies.checkpoints import KINDS
 
-DEFAULT_EPISODES = {"il": 3000, "hbmp": 6000, "hbmp-s": 6000, "flat": 6000}
-"""Paper: 6000 RL episodes; DAgger's α starts decaying after 3000 (its IL budget is not given)."""
-DEFAULT_FIDELITY = {"il": "event", "hbmp": "continuous", "hbmp-s": "continuous", "flat": None}
-REWARD = {"il": "dense", "hbmp": "dense", "hbmp-s": "sparse", "flat": "env"}
+DEFAULT_EPISODES = {"il": 3000, "hbmp": 6000, "hbmp-s": 6000, "flat": 6000, "flat-il": 200}
+"""Paper: 6000 RL episodes; DAgger's α starts decaying after 3000 (its IL budget is not given); flat-il: the
+budget of its shipped run."""
+DEFAULT_FIDELITY = {"il": "event", "hbmp": "continuous", "hbmp-s": "continuous", "flat": None, "flat-il": None}
+REWARD = {"il": "dense", "hbmp": "dense", "hbmp-s": "sparse", "flat": "env", "flat-il": "env"}
+DAGGER_KINDS = ("il", "flat-il")
+"""The kinds DAgger trains (from the expert, from a random network); the others are PPO's."""
+CONTROL_KINDS = ("flat", "flat-il")
+"""The kinds that drive the control env (acceleration and steering, no behavior layer)."""
 CONTROL_ENV = "hbmp_bench.envs.control_env:ControlEnv"
 CRITIC_WARMUP_EPISODES = 100
 """Default critic warm-up of a PPO run that starts from an IL actor (none from a random one)."""
@@ -61,16 +67,17 @@ def _command_line(args: argparse.Namespace) -> str:
 
 def resolve_init(kind: str, init: str | None) -> str | None:
     """The checkpoint that initialises a PPO actor: a path, a shipped name, or None (random)."""
-    if kind == "il":
+    if kind in DAGGER_KINDS:
         if init not in (None, "none"):
-            raise UserError("--init does not apply to il (DAgger starts from a random network)")
+            raise UserError(f"--init does not apply to {kind} (DAgger starts from a random network)")
         return None
     if init is None:
         init = "il" if kind in ("hbmp", "hbmp-s") else "none"
     if init == "none":
         return None
-    if kind == "flat":
-        raise UserError("the flat baseline has no behavior layer to initialise from; use --init none")
+    if kind == "flat" and not (init == "flat-il" or init.endswith(".pt")):
+        raise UserError("the flat baseline starts from a control policy: --init flat-il, a flat-il checkpoint "
+                        "(.pt) or none")
     if init.endswith(".pt"):
         if not os.path.isfile(init):
             raise FileNotFoundError(f"no checkpoint file {init!r}")
@@ -110,7 +117,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
         args.out = os.path.join("runs", f"{kind}__{args.scenario.split('/')[-1]}__{args.seed}__{int(time.time())}")
     _check_kind_options(args)
     init = resolve_init(kind, args.init) if args.resume is None else None
-    ppo = _ppo_config(args, init) if kind != "il" and args.resume is None else None  # a resume keeps its own
+    ppo = _ppo_config(args, init) if kind not in DAGGER_KINDS and args.resume is None else None  # a resume keeps its own
     env_config = _env_config(args, init)
     run = RunConfig(kind=kind, episodes=args.episodes, out=args.out, workers=args.workers, backend=args.backend,
                     address=args.address, seed=args.seed,
@@ -134,9 +141,12 @@ def _cmd_train(args: argparse.Namespace) -> int:
 def _check_kind_options(args: argparse.Namespace) -> None:
     """Refuse options the run's kind (or a resume) does not take, before anything is read or started."""
     if args.validate_every and args.kind == "il":
-        raise UserError("--validate-every applies to hbmp, hbmp-s and flat (DAgger's rounds.csv has its holdout)")
-    if args.ppo and args.kind == "il":
-        raise UserError("--ppo options apply to hbmp, hbmp-s and flat (il is trained by DAgger)")
+        raise UserError("--validate-every applies to hbmp, hbmp-s, flat and flat-il (DAgger's rounds.csv has "
+                        "its holdout)")
+    if args.ppo and args.kind in DAGGER_KINDS:
+        raise UserError(f"--ppo options apply to hbmp, hbmp-s and flat ({args.kind} is trained by DAgger)")
+    if args.mask_actions and args.kind in CONTROL_KINDS:
+        raise UserError(f"--mask-actions masks behaviors; {args.kind} drives with controls")
     if args.ppo and args.resume:
         raise UserError("a resumed run keeps the PPO options its checkpoint recorded; start a new --out to change "
                         "them")
@@ -159,9 +169,9 @@ def _env_config(args: argparse.Namespace, init: str | None):
                                     ("road_profile", args.road_profile), ("density", args.density))
                   if v is not None}
     entry_point = None
-    if kind == "flat":
+    if kind in CONTROL_KINDS:
         if importlib.util.find_spec(CONTROL_ENV.split(":")[0]) is None:
-            raise UserError("train flat needs the continuous-control env hbmp_bench.envs.control_env.ControlEnv, "
+            raise UserError(f"train {kind} needs the continuous-control env hbmp_bench.envs.control_env.ControlEnv, "
                             "which this installation does not have yet")
         entry_point = CONTROL_ENV
     return WorkerEnvConfig(env_id=args.scenario, env_kwargs=env_kwargs, entry_point=entry_point, reward=REWARD[kind])
@@ -187,15 +197,19 @@ def _ppo_config(args: argparse.Namespace, init: str | None):
 
 
 def _train(kind: str, run, env_config, args: argparse.Namespace, init: str | None, ppo) -> dict:
-    """DAgger for il, PPO otherwise (``ppo``: None on a resume, which keeps the recorded options); the run's
-    progress and the path of its policy."""
+    """DAgger for il (behaviors) and flat-il (controls), PPO otherwise (``ppo``: None on a resume, which keeps
+    the recorded options); the run's progress and the path of its policy."""
+    if kind == "flat-il":
+        from hbmp_bench.training.control_dagger import DaggerControlConfig, train_control_dagger
+
+        return train_control_dagger(run, env_config, DaggerControlConfig())
     if kind == "il":
         from hbmp_bench.training.dagger import DaggerConfig, train_dagger
 
         return train_dagger(run, env_config, DaggerConfig(mask_actions=args.mask_actions))
     from hbmp_bench.training.ppo import train_ppo
 
-    label = None if init is None else (args.init or "il")
+    label = None if init is None else (args.init or ("flat-il" if kind == "flat" else "il"))
     return train_ppo(run, env_config, ppo, init=init, init_label=label)
 
 
@@ -230,7 +244,7 @@ def _cmd_curves(args: argparse.Namespace) -> int:
 
 def add_commands(subparsers) -> None:
     """Add ``train`` and ``curves`` to the ``hbmp-bench`` parser."""
-    p = subparsers.add_parser("train", help="train il (DAgger), hbmp, hbmp-s or flat (PPO, rsl-rl)",
+    p = subparsers.add_parser("train", help="train il or flat-il (DAgger), hbmp, hbmp-s or flat (PPO, rsl-rl)",
                               description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("kind", choices=KINDS, help="what to train: " + ", ".join(KINDS))
     p.add_argument("--scenario", default="hbmp_bench/Training-v0", help="env id; hbmp_bench/Training-v0 is Town03 with a random start and goal every reset")
@@ -244,7 +258,8 @@ def add_commands(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the run (episodes, weights, sampling)")
     p.add_argument("--out", default=None, help="run folder (default: runs/<kind>__<scenario>__<seed>__<time>)")
     p.add_argument("--init", default=None,
-                   help="hbmp/hbmp-s actor initialisation: 'il' (shipped, default), a .pt checkpoint, or 'none'")
+                   help="PPO actor initialisation: hbmp/hbmp-s 'il' (shipped, default), flat 'flat-il' (shipped; "
+                        "default none), a .pt checkpoint, or 'none'")
     p.add_argument("--resume", default=None, help="continue from a run's checkpoint.pt (with the fidelity, M_t, R_t "
                                                   "and density it recorded, unless given)")
     p.add_argument("--observation", choices=("deformed", "vehicle_centric"), default=None,
@@ -266,8 +281,8 @@ def add_commands(subparsers) -> None:
                         "(defaults: the paper's values, rsl-rl's where it gives none)")
     p.add_argument("--save-every", type=int, default=SAVE_EVERY, help="checkpoint every N episodes")
     p.add_argument("--validate-every", type=int, default=0, metavar="N",
-                   help="PPO: every N episodes, evaluate the greedy policy on the hbmp-val suite (held-out "
-                        "Town03 episodes) into validation.csv and keep the best as best.pt; 0: never")
+                   help="PPO and flat-il: every N episodes, evaluate the greedy policy on the hbmp-val suite "
+                        "(held-out Town03 episodes) into validation.csv and keep the best as best.pt; 0: never")
     p.add_argument("--validate-episodes", type=int, default=None, metavar="N",
                    help="with --validate-every: the first N validation episodes per task, up to 50 (default: 20)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")

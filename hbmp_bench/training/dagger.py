@@ -107,14 +107,18 @@ class DemoDataset:
 
     Args:
         shapes: per-group shape of one state, e.g. ``{"occupancy": (1, 64, 36), "road": (10,)}``.
+        label_shape: shape of one label: ``()`` for a behavior index (int8), ``(2,)`` for a control
+            vector (float32, the flat baseline's ``[a, s]``: :mod:`hbmp_bench.training.control_dagger`).
     """
 
-    def __init__(self, shapes: dict[str, tuple[int, ...]]):
+    def __init__(self, shapes: dict[str, tuple[int, ...]], label_shape: tuple[int, ...] = ()):
         self.shapes = {k: tuple(v) for k, v in shapes.items()}
         self.packed = {k: len(v) > 1 for k, v in self.shapes.items()}
         self.size = 0
+        self.label_shape = tuple(label_shape)
+        self._label_dtype = np.float32 if self.label_shape else np.int8
         self._data: dict[str, np.ndarray] = {k: self._empty(k, 1024) for k in self.shapes}
-        self._labels = np.zeros(1024, dtype=np.int8)
+        self._labels = np.zeros((1024, *self.label_shape), dtype=self._label_dtype)
 
     def _width(self, key: str) -> int:
         n = int(np.prod(self.shapes[key]))
@@ -127,7 +131,7 @@ class DemoDataset:
         return self.size
 
     def add(self, obs: dict[str, np.ndarray], labels: np.ndarray) -> None:
-        """Append n states: ``obs[group]`` of shape (n, *shape), ``labels`` (n,) behavior indices."""
+        """Append n states: ``obs[group]`` of shape (n, *shape), ``labels`` (n, *label_shape)."""
         n = len(labels)
         if n == 0:
             return
@@ -137,7 +141,7 @@ class DemoDataset:
                 grown = self._empty(k, capacity)
                 grown[: self.size] = arr[: self.size]
                 self._data[k] = grown
-            labels_grown = np.zeros(capacity, dtype=np.int8)
+            labels_grown = np.zeros((capacity, *self.label_shape), dtype=self._label_dtype)
             labels_grown[: self.size] = self._labels[: self.size]
             self._labels = labels_grown
         for k in self.shapes:
@@ -151,14 +155,17 @@ class DemoDataset:
         self.size += n
 
     def get(self, index: np.ndarray) -> tuple[TensorDict, torch.Tensor]:
-        """States ``index`` as a TensorDict (len(index),) of float32 groups, and their labels (long)."""
+        """States ``index`` as a TensorDict (len(index),) of float32 groups, and their labels (long behavior
+        indices, or float32 control vectors)."""
         groups = {}
         for k, shape in self.shapes.items():
             rows = self._data[k][index]
             if self.packed[k]:
                 rows = np.unpackbits(rows, axis=1, count=int(np.prod(shape))).astype(np.float32)
             groups[k] = torch.from_numpy(np.ascontiguousarray(rows).reshape(len(index), *shape))
-        return TensorDict(groups, batch_size=[len(index)]), torch.from_numpy(self._labels[index].astype(np.int64))
+        labels = self._labels[index]
+        labels = labels.astype(np.float32 if self.label_shape else np.int64)
+        return TensorDict(groups, batch_size=[len(index)]), torch.from_numpy(labels)
 
     def label_counts(self) -> np.ndarray:
         return np.bincount(self._labels[: self.size], minlength=NUM_BEHAVIORS)
@@ -170,7 +177,7 @@ class DemoDataset:
 
     def load_state_dict(self, arrays: dict[str, np.ndarray], prefix: str) -> None:
         self._data = {k: np.array(arrays[f"{prefix}/{k}"]) for k in self.shapes}
-        self._labels = np.array(arrays[f"{prefix}/labels"])
+        self._labels = np.array(arrays[f"{prefix}/labels"], dtype=self._label_dtype)
         self.size = len(self._labels)
 
 

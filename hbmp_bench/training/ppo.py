@@ -81,7 +81,7 @@ from rsl_rl.utils.logger import Logger
 
 from hbmp_bench.errors import ConfigError, UserError
 from hbmp_bench.policies.checkpoints import load_checkpoint
-from hbmp_bench.policies.networks import behavior_model_cfgs, control_model_cfgs, observation_shapes
+from hbmp_bench.policies.networks import NETWORK, behavior_model_cfgs, control_model_cfgs, observation_shapes
 from hbmp_bench.training.run import RunConfig
 from hbmp_bench.training.runlog import EPISODE_COLUMNS, ITERATION_COLUMNS
 from hbmp_bench.training.session import TrainingSession
@@ -90,6 +90,9 @@ from hbmp_bench.training.worker import WorkerEnvConfig
 
 MASK_GROUP = "action_mask"
 ANCHOR_KL = ("forward", "reverse")
+INIT_KINDS = {"behavior": ("il", "hbmp", "hbmp-s"), "flat": ("flat-il", "flat")}
+"""The checkpoint kinds a PPO run's ``--init`` actor may come from: behavior policies for hbmp and hbmp-s,
+control policies for flat (``flat-il``: PPO from the imitation of the expert's controls)."""
 
 
 class TwoRatePPO(PPO):
@@ -404,25 +407,27 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
         env_config: environment and reward of the workers (``reward_scale`` is taken from ``ppo``).
         ppo: hyper-parameters (None: the defaults). A resumed run keeps the ones its checkpoint
             recorded (a warning names any given here that differ).
-        init: checkpoint whose actor initialises the policy (an ``il`` one for hbmp), or None.
+        init: checkpoint whose actor initialises the policy (an ``il`` one for hbmp, ``flat-il`` for flat:
+            :data:`INIT_KINDS`), or None.
         init_label: how the model card and checkpoint name ``init`` (default: the path itself),
             e.g. ``il`` for the shipped checkpoint.
 
     Returns:
         The run's progress dict and the path of the final policy (``policy``).
     """
-    if run.kind == "il":
-        raise ConfigError("train il with hbmp_bench.training.dagger.train_dagger")
+    if run.kind in ("il", "flat-il"):
+        raise ConfigError(f"train {run.kind} with DAgger (hbmp_bench.training.dagger, hbmp_bench.training.control_dagger)")
     session = TrainingSession(run)
     resume = session.resume
     ppo = _recorded_ppo(resume, ppo) if resume is not None else ppo or PPOConfig()
     env_config = dataclasses.replace(env_config, reward_scale=ppo.reward_scale, expert_labels=False)
-    init_ckpt = load_checkpoint(init, kinds=("il", "hbmp", "hbmp-s")) if init and resume is None else None
+    init_kinds = INIT_KINDS["flat" if run.kind == "flat" else "behavior"]
+    init_ckpt = load_checkpoint(init, kinds=init_kinds) if init and resume is None else None
     from rsl_rl.runners import OnPolicyRunner
 
     with session:
         env = session.start(env_config)
-        actor_cfg, critic_cfg, groups = _model_cfgs(env, ppo)
+        actor_cfg, critic_cfg, groups = _model_cfgs(env, ppo, init_ckpt)
         cfg = ppo.runner_cfg(env.num_envs, {"actor": groups, "critic": groups}, actor_cfg, critic_cfg)
         with contextlib.redirect_stdout(io.StringIO()):
             runner = OnPolicyRunner(env, cfg, log_dir=None, device="cpu")
@@ -497,8 +502,9 @@ def _recorded_ppo(resume: dict[str, Any], asked: PPOConfig | None) -> PPOConfig:
     return recorded
 
 
-def _model_cfgs(env, ppo: PPOConfig) -> tuple[dict, dict, list[str]]:
-    """The actor and critic configs for ``env``'s action space and the observation groups they read."""
+def _model_cfgs(env, ppo: PPOConfig, init: dict[str, Any] | None = None) -> tuple[dict, dict, list[str]]:
+    """The actor and critic configs for ``env``'s action space and the observation groups they read; with an
+    ``init`` checkpoint, the actor has its layer sizes (``flat-il``'s compact trunk)."""
     from gymnasium import spaces
 
     groups = input_groups(env.get_observations())
@@ -510,6 +516,9 @@ def _model_cfgs(env, ppo: PPOConfig) -> tuple[dict, dict, list[str]]:
                           "the flat baseline's controls are Gaussian")
     actor_cfg, critic_cfg = (behavior_model_cfgs(ppo.mask_actions, temperature=ppo.temperature) if discrete
                              else control_model_cfgs(ppo.init_std))
+    if init is not None:
+        sizes = init["model"]["actor"]
+        actor_cfg = {**actor_cfg, **{k: sizes[k] for k in NETWORK if k in sizes}}
     return actor_cfg, critic_cfg, groups
 
 

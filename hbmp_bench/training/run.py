@@ -34,7 +34,7 @@ class RunConfig:
     """Options common to every training kind.
 
     Attributes:
-        kind: ``il``, ``hbmp``, ``hbmp-s`` or ``flat``.
+        kind: ``il``, ``hbmp``, ``hbmp-s``, ``flat`` or ``flat-il``.
         episodes: episode budget of this run (total, counting episodes before a resume).
         out: run folder.
         workers: environment worker processes (one libsumo simulation each).

@@ -145,7 +145,8 @@ class WorkerVecEnv(VecEnv):
             extras: ``time_outs`` (num_envs,) long: ended by the env's timeout; ``expert_actions``
                 (num_envs,) long: the expert's behavior for the returned obs (-1 without labels);
                 ``episodes``: ``[(env index, summary)]`` finished this step; ``log``: means of the
-                finished episodes' r_T, success and length under ``/episode/...`` (only when some ended).
+                finished episodes' r_T, success and length under ``/episode/...`` (only when some ended);
+                ``expert_controls`` (num_envs, 2): the expert's controls for the returned obs (only with them).
         """
         if self._closed:
             raise RuntimeError("the VecEnv is closed")
@@ -167,6 +168,8 @@ class WorkerVecEnv(VecEnv):
             "expert_actions": torch.tensor([r.expert_action for r in replies], dtype=torch.long, device=self.device),
             "episodes": episodes,
         }
+        if replies[0].expert_control is not None:
+            extras["expert_controls"] = self.expert_controls
         if episodes:
             extras["log"] = {
                 f"/episode/{key}": torch.tensor([float(e[key]) for _, e in episodes])
@@ -178,6 +181,13 @@ class WorkerVecEnv(VecEnv):
     def expert_actions(self) -> torch.Tensor:
         """(num_envs,) long: the expert's behavior for the current observations (-1 without labels)."""
         return torch.tensor([r.expert_action for r in self._replies], dtype=torch.long, device=self.device)
+
+    @property
+    def expert_controls(self) -> torch.Tensor:
+        """(num_envs, 2) float32: the control ``[a, s]`` the expert's stack applies in the current states
+        (``WorkerEnvConfig.expert_controls``)."""
+        return torch.as_tensor(np.stack([r.expert_control for r in self._replies]), dtype=torch.float32,
+                               device=self.device)
 
     def pop_episodes(self) -> list[tuple[int, dict[str, Any]]]:
         """Summaries ``[(env index, summary)]`` of the episodes finished since the last call, in order."""

@@ -41,6 +41,9 @@ class WorkerEnvConfig:
             the env is then made with the options the expert asks for (``privileged=True``: its
             info, never the learner's observation, holds the privileged scene).
         reward_scale: factor on the training reward (the CSV log keeps r_T and r_k unscaled).
+        expert_controls: also report the control ``[a, s]`` the expert's stack would apply in the ego's
+            state (the flat baseline's DAgger: :class:`~hbmp_bench.training.control_dagger.ExpertControl`);
+            the env is made with the options the expert asks for, as for ``expert_labels``.
     """
 
     env_id: str = "hbmp_bench/Training-v0"
@@ -49,6 +52,7 @@ class WorkerEnvConfig:
     reward: str = "dense"
     expert_labels: bool = False
     reward_scale: float = 1.0
+    expert_controls: bool = False
 
     def __post_init__(self):
         if self.reward not in TRAINING_REWARD_MODES:
@@ -135,6 +139,8 @@ class StepReply:
     action_mask: (5,) int8 feasible behaviors of ``obs``, None if the env has none.
     expert_action: the expert's behavior for ``obs`` (-1 when labels are off).
     episode: the finished episode's summary when the step ended one.
+    expert_control: (2,) float32 the control the expert's stack applies in ``obs``'s state (None when
+        ``expert_controls`` is off).
     """
 
     obs: dict[str, np.ndarray]
@@ -144,32 +150,43 @@ class StepReply:
     action_mask: np.ndarray | None = None
     expert_action: int = -1
     episode: dict[str, Any] | None = None
+    expert_control: np.ndarray | None = None
 
 
 class EnvRunner:
     """The worker's state: its environment, the expert (for labels) and the running episode."""
 
     def __init__(self, config: WorkerEnvConfig):
-        self.expert = None
-        if config.expert_labels:
+        self.expert = self.controls = None
+        if config.expert_labels or config.expert_controls:
             from hbmp_bench.agents import agent_env_kwargs, load_agent
 
-            self.expert = load_agent("expert")
-            config = dataclasses.replace(config, env_kwargs={**agent_env_kwargs(self.expert), **config.kwargs})
+            expert = load_agent("expert")
+            config = dataclasses.replace(config, env_kwargs={**agent_env_kwargs(expert), **config.kwargs})
+            if config.expert_controls:
+                from hbmp_bench.training.control_dagger import ExpertControl
+
+                self.controls = ExpertControl(expert)
+            else:
+                self.expert = expert
         self.config = config
         self.env = make_env(config)
         self.tally = EpisodeTally()
 
     def _reply(self, obs: dict, info: dict, new_episode: bool, **fields) -> StepReply:
-        expert_action = -1
+        expert_action, expert_control = -1, None
         if self.expert is not None:
             if new_episode:
                 self.expert.reset(info)
             expert_action = int(self.expert.act(obs, info))
+        if self.controls is not None:
+            if new_episode:
+                self.controls.reset(info)
+            expert_action, expert_control = self.controls.label(self.env, obs, info)
         mask = info.get("action_mask")
         return StepReply(obs={k: np.asarray(v) for k, v in obs.items()},
                          action_mask=None if mask is None else np.asarray(mask, dtype=np.int8),
-                         expert_action=expert_action, **fields)
+                         expert_action=expert_action, expert_control=expert_control, **fields)
 
     def reset(self, seed: int | None) -> StepReply:
         obs, info = self.env.reset(seed=seed)
