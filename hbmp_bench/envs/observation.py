@@ -33,6 +33,7 @@ labelled by the lawful expert, a network on R_t alone predicts its behavior at r
 from __future__ import annotations
 
 import functools
+import math
 from dataclasses import dataclass
 from enum import IntEnum
 from typing import TYPE_CHECKING
@@ -154,8 +155,8 @@ def road_vector(config: ObservationConfig, paper_road: np.ndarray, stop_distance
     inside a junction) and the speed [m/s]."""
     if config.road == "paper":
         return paper_road
-    d_stop = np.clip(stop_distance_m / STOP_SCALE_M, 0.0, 2.0) if np.isfinite(stop_distance_m) else 2.0
-    v = np.clip(speed_mps / SPEED_SCALE_MPS, 0.0, 2.0)
+    d_stop = _clip(stop_distance_m / STOP_SCALE_M, 0.0, 2.0) if math.isfinite(stop_distance_m) else 2.0
+    v = _clip(speed_mps / SPEED_SCALE_MPS, 0.0, 2.0)
     return np.concatenate([paper_road, np.array([d_stop, v], dtype=np.float32)])
 
 
@@ -232,6 +233,52 @@ class ObservationBuilder:
         ``lane_id`` continued onto ``next_edges`` (into the lanes ``into``: :func:`followed_path`)."""
         path = self._path(lane_id, tuple(next_edges), tuple(into)) if self.config.kind == "deformed" and len(xy) else None
         return occupancy_grid(self.config, ego_xy, ego_yaw, path, xy, yaw, length, width)
+
+    def occupancy_all(self, requests: list[tuple]) -> list[np.ndarray]:
+        """:meth:`occupancy` of N vehicles, ``requests[n]`` its arguments in order: the same grids, the
+        deformed ones rasterised in one compiled call (:func:`.occupancy_kernel.deformed_grids`; the sampling
+        of each vehicle's nearby footprints computed for all at once)."""
+        cfg = self.config
+        if cfg.kind != "deformed" or len(requests) < 2:
+            return [self.occupancy(*r) for r in requests]
+        from hbmp_bench.envs.occupancy_kernel import deformed_grids  # numba loads on the first call
+
+        counts = np.array([len(r[4]) for r in requests])
+        out = [np.zeros((1, cfg.rows, cfg.cols), dtype=np.float32) for _ in requests]
+        if not counts.any():
+            return out
+        ego_xy = np.array([r[0] for r in requests], dtype=float).reshape(-1, 2)
+        xy = np.concatenate([r[4] for r in requests]).reshape(-1, 2)
+        length = np.concatenate([r[6] for r in requests])
+        width = np.concatenate([r[7] for r in requests])
+        near = np.hypot(*(xy - np.repeat(ego_xy, counts, axis=0)).T) < cfg.rows * cfg.cell_long_m + 10.0
+        bounds = np.concatenate([[0], np.cumsum(counts)])
+        step = min(cfg.cell_long_m, cfg.cell_lat_m)
+        drawn, n_long, n_lat, paths = [], [], [], []
+        for n, r in enumerate(requests):  # _footprint_sampling per vehicle, on its slice
+            mine = near[bounds[n]:bounds[n + 1]]
+            if not mine.any():
+                continue
+            drawn.append(n)
+            n_long.append(max(10, int(np.ceil(float(length[bounds[n]:bounds[n + 1]][mine].max()) / step)) + 1))
+            n_lat.append(max(4, int(np.ceil(float(width[bounds[n]:bounds[n + 1]][mine].max()) / step)) + 1))
+            paths.append(self._path(r[2], tuple(r[3]), tuple(r[8]) if len(r) > 8 else ()).segment_arrays())
+        if not drawn:
+            return out
+        keep = np.zeros(len(near), dtype=bool)
+        for n in drawn:
+            keep[bounds[n]:bounds[n + 1]] = near[bounds[n]:bounds[n + 1]]
+        yaw = np.concatenate([r[5] for r in requests])
+        actor_start = np.concatenate([[0], np.cumsum([int(near[bounds[n]:bounds[n + 1]].sum()) for n in drawn])])
+        seg_start = np.concatenate([[0], np.cumsum([len(p[1]) for p in paths])])
+        arrays = [np.concatenate([p[k] for p in paths]) for k in range(10)]
+        grids = deformed_grids(ego_xy[drawn], actor_start, xy[keep, 0], xy[keep, 1], yaw[keep].astype(float),
+                               length[keep].astype(float), width[keep].astype(float), np.array(n_long), np.array(n_lat),
+                               seg_start, *arrays, cfg.rows, cfg.cols, float(cfg.cell_long_m), float(cfg.cell_lat_m),
+                               float(cfg.back_m), float(cfg.ahead_m), float(cfg.half_width_m))
+        for k, n in enumerate(drawn):
+            out[n] = grids[k]
+        return out
 
 
 def _footprint_sampling(cfg: ObservationConfig, ego_xy: np.ndarray, xy: np.ndarray, length: np.ndarray,
@@ -342,7 +389,7 @@ def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[s
         good_here = frozenset(ids.index(g) for g in good if g in ids)
         r[2], r[3], r[4], scene["route_lane_offset"] = route_lane_features(here, good_here, r[0] > 0, r[1] > 0)
         remaining = max(lane.length - lane_pos, 0.0)
-        r[8] = np.clip(remaining / max(lane.length, 1e-6), 0.0, 1.0)
+        r[8] = _clip(remaining / max(lane.length, 1e-6), 0.0, 1.0)
         scene["stop_distance_m"] = remaining
         scene["lane_pos_m"] = float(lane_pos)
         if light is not None and light.distance <= remaining + 1.0:
@@ -355,5 +402,10 @@ def road_profile(net: RoadNetwork, lane_id: str, lane_pos: float, route: tuple[s
         if light is not None:  # privileged only: the next light beyond the junction (R_t: none)
             scene["light"] = light.state
             scene["stop_distance_m"] = float(light.distance)
-    r[9] = np.clip(speed / max(lane.speed, 1e-6), 0.0, 2.0)
+    r[9] = _clip(speed / max(lane.speed, 1e-6), 0.0, 2.0)
     return r, scene
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    """``np.clip`` of one number (NaN stays NaN), without the array machinery (~5 µs a call, 4 per R_t)."""
+    return x if x != x else min(max(x, lo), hi)

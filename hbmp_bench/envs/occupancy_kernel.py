@@ -116,6 +116,15 @@ def deformed_grid(ego_x, ego_y, xs, ys, yaws, lengths, widths, n_long, n_lat, ps
             (:class:`.observation.ObservationConfig`) [cells, m].
     """
     grid = np.zeros((1, rows, cols), np.float32)
+    _deformed_into(grid, ego_x, ego_y, xs, ys, yaws, lengths, widths, n_long, n_lat, ps, x0, y0, tx, ty, chord, heading,
+                   kappa, dh, dk, rows, cols, cell_long, cell_lat, back_m, ahead_m, half_width)
+    return grid
+
+
+@njit(cache=True, nogil=True)
+def _deformed_into(grid, ego_x, ego_y, xs, ys, yaws, lengths, widths, n_long, n_lat, ps, x0, y0, tx, ty, chord, heading,
+                   kappa, dh, dk, rows, cols, cell_long, cell_lat, back_m, ahead_m, half_width):
+    """:func:`deformed_grid` marking the cells in ``grid`` (1, rows, cols), zeros on entry."""
     s_ego = project_pose(ego_x, ego_y, 0.0, np.nan, ps, x0, y0, tx, ty, chord, heading, kappa, dh, dk)[0]
     nseg = len(chord)
     i0 = segment_of(ps, s_ego - (back_m + 10.0))
@@ -161,7 +170,33 @@ def deformed_grid(ego_x, ego_y, xs, ys, yaws, lengths, widths, n_long, n_lat, ps
                 col = math.floor((e + half_width) / cell_lat)
                 if 0 <= row < rows and 0 <= col < cols:
                     grid[0, row, col] = 1.0
-    return grid
+
+
+@njit(cache=True, nogil=True)
+def deformed_grids(ego_xy, actor_start, xs, ys, yaws, lengths, widths, n_long, n_lat, seg_start, ps, x0, y0, tx, ty,
+                   chord, heading, kappa, dh, dk, rows, cols, cell_long, cell_lat, back_m, ahead_m, half_width):
+    """:func:`deformed_grid` of N vehicles in one call: (N, 1, rows, cols) float32, row ``n`` equal to
+    :func:`deformed_grid` of vehicle ``n``'s footprints and centreline.
+
+    Args:
+        ego_xy: (N, 2) the vehicles' centres [m].
+        actor_start: (N + 1,) vehicle ``n``'s footprints are ``xs[actor_start[n]:actor_start[n + 1]]`` (and
+            the same rows of ``ys``, ``yaws``, ``lengths``, ``widths``); ``n_long``, ``n_lat``: (N,) its
+            sampling.
+        seg_start: (N + 1,) vehicle ``n``'s centreline is segments ``seg_start[n]:seg_start[n + 1]`` of
+            ``x0`` ... ``dk`` and vertices ``seg_start[n] + n:seg_start[n + 1] + n + 1`` of ``ps``.
+        rows ... half_width: the grid, as :func:`deformed_grid`.
+    """
+    N = ego_xy.shape[0]
+    grids = np.zeros((N, 1, rows, cols), np.float32)
+    for n in range(N):
+        a0, a1 = actor_start[n], actor_start[n + 1]
+        s0, s1 = seg_start[n], seg_start[n + 1]
+        _deformed_into(grids[n], ego_xy[n, 0], ego_xy[n, 1], xs[a0:a1], ys[a0:a1], yaws[a0:a1], lengths[a0:a1],
+                       widths[a0:a1], n_long[n], n_lat[n], ps[s0 + n:s1 + n + 1], x0[s0:s1], y0[s0:s1], tx[s0:s1],
+                       ty[s0:s1], chord[s0:s1], heading[s0 + n:s1 + n + 1], kappa[s0 + n:s1 + n + 1], dh[s0:s1],
+                       dk[s0:s1], rows, cols, cell_long, cell_lat, back_m, ahead_m, half_width)
+    return grids
 
 
 def compile_kernel() -> None:

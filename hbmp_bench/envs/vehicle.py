@@ -228,10 +228,11 @@ class ControlledVehicle:
         """(5,) int8: 1 where a behavior is feasible for R_t."""
         return self.route.action_mask()
 
-    def outcome(self, events: StepEvents, behavior_ended: bool) -> tuple[dict, float, dict]:
+    def outcome(self, events: StepEvents, behavior_ended: bool,
+                occupancy: np.ndarray | None = None) -> tuple[dict, float, dict]:
         """(observation, reward, info) after ``events``: r_T pays ``events``; r_k (dense reward)
-        is paid only when the behavior has ended."""
-        obs, info = self.observe(events)
+        is paid only when the behavior has ended. ``occupancy``: M_t, when the world built it (see :meth:`observe`)."""
+        obs, info = self.observe(events, occupancy)
         r_terminal = events_reward(events, timed_out=self.end_reason in GOAL_UNREACHABLE)
         r_k = self.driver.behavior_reward() if behavior_ended else 0.0
         if behavior_ended:
@@ -245,16 +246,23 @@ class ControlledVehicle:
         info["reward_components"] = {"r_k": r_k, "r_T": r_terminal}
         return obs, r_terminal + (r_k if self.shared.dense_reward else 0.0), info
 
-    def observe(self, events: StepEvents) -> tuple[dict, dict]:
-        """({"occupancy": M_t, "road": R_t}, info) now; ``self.scene`` is the typed scene."""
+    def occupancy_request(self) -> tuple:
+        """The arguments of :meth:`ObservationBuilder.occupancy` for M_t now (the world builds every vehicle's
+        M_t in one call: :meth:`ObservationBuilder.occupancy_all`)."""
         s, a = self.state, self.actors
+        return (s.xy, s.yaw, self.followed_lane or s.lane, self.next_edges(), a.xy, a.yaw, a.length, a.width,
+                self.next_lanes())
+
+    def observe(self, events: StepEvents, occupancy: np.ndarray | None = None) -> tuple[dict, dict]:
+        """({"occupancy": M_t, "road": R_t}, info) now; ``self.scene`` is the typed scene. ``occupancy``: M_t
+        as built from :meth:`occupancy_request` now (None: built here)."""
         road, self.scene = self.route.road_profile()
         road = road_vector(self.shared.observer.config, road, self.scene.stop_distance_m, self.scene.speed_mps)
         extra = self.driver.road_extra()
         if extra.size:
             road = np.concatenate([road.astype(np.float32), extra])
-        occupancy = self.shared.observer.occupancy(s.xy, s.yaw, self.followed_lane or s.lane, self.next_edges(),
-                                                   a.xy, a.yaw, a.length, a.width, self.next_lanes())
+        if occupancy is None:
+            occupancy = self.shared.observer.occupancy(*self.occupancy_request())
         info = {
             **({"action_mask": self.action_mask()} if self.driver.behaviors else {}),
             "events": {kind: getattr(events, kind) for kind in EVENT_KINDS},

@@ -5,7 +5,8 @@ trucks longer than the default sampling and pedestrians, near and past the grid'
 import numpy as np
 import pytest
 
-from hbmp_bench.envs.observation import ObservationConfig, followed_path, occupancy_grid, occupancy_grid_reference
+from hbmp_bench.envs.observation import (ObservationBuilder, ObservationConfig, followed_path, occupancy_grid,
+                                         occupancy_grid_reference)
 from hbmp_bench.scenarios import road_network
 
 
@@ -57,3 +58,30 @@ def test_pruned_search_marks_the_same_cells_beside_the_grid_edges():
         width = rng.uniform(0.6, 2.6, k)
         args = (cfg, ego_xy, 0.0, path, xy, yaw, length, width)
         np.testing.assert_array_equal(occupancy_grid(*args), occupancy_grid_reference(*args))
+
+
+def test_occupancy_of_many_vehicles_in_one_call_equals_one_call_each():
+    """``ObservationBuilder.occupancy_all`` (one compiled call) gives each vehicle's ``occupancy``, also for a
+    vehicle with no actor, or none near, among others."""
+    net = road_network("Town03")
+    builder = ObservationBuilder(net, ObservationConfig())
+    rng = np.random.default_rng(5)
+    lanes = sorted(net.lanes)
+    for _ in range(10):
+        requests = []
+        for v in range(int(rng.integers(2, 9))):
+            lane = lanes[rng.integers(len(lanes))]
+            edges = tuple(e for _, e in net.lane_next.get(lane, ()))[:1]
+            ego_xy = net.position(lane, float(rng.uniform(0.0, net.lane(lane).length)))
+            k = 0 if v == 1 else int(rng.integers(0, 50))
+            spread = 500.0 if v == 2 else 60.0  # vehicle 2: (almost) nobody near
+            xy = ego_xy + rng.uniform(-spread, spread, (k, 2))
+            yaw = rng.uniform(-np.pi, np.pi, k)
+            length = np.where(rng.random(k) < 0.2, 0.6, rng.uniform(3.0, 14.0, k))
+            width = np.where(length < 1.0, 0.6, rng.uniform(1.6, 2.6, k))
+            requests.append((ego_xy, 0.0, lane, edges, xy, yaw, length, width, ()))
+        grids = builder.occupancy_all(requests)
+        assert len(grids) == len(requests)
+        for grid, r in zip(grids, requests):
+            np.testing.assert_array_equal(grid, builder.occupancy(*r))
+            assert grid.dtype == np.float32 and grid.shape == (1, 64, 36)
