@@ -200,12 +200,16 @@ def deformed_grids(ego_xy, actor_start, xs, ys, yaws, lengths, widths, n_long, n
 
 
 def compile_kernel() -> None:
-    """Compile :func:`deformed_grid` (or load it from numba's on-disk cache) for the argument types
-    :func:`.observation.occupancy_grid` passes (C-contiguous float64 arrays, Python ints and floats, a
-    :class:`~hbmp_bench.planning.frame.Path`'s segment arrays), so that the first M_t of a timed run
-    does not compile. (It calls the kernel itself: this module never imports ``observation``.)"""
+    """Compile :func:`deformed_grid` and :func:`deformed_grids` (or load them from numba's on-disk cache) for
+    the argument types :func:`.observation.occupancy_grid` and ``ObservationBuilder.occupancy_all`` pass
+    (C-contiguous float64 arrays, Python ints and floats, a :class:`~hbmp_bench.planning.frame.Path`'s segment
+    arrays or their concatenation), so that the first M_t of a timed run does not compile. (It calls the
+    kernels itself: this module never imports ``observation``.)"""
     from hbmp_bench.planning.frame import Path
 
     path = Path(np.column_stack([np.linspace(-20.0, 60.0, 9), np.zeros(9)]))
     deformed_grid(0.0, 0.0, np.array([8.0]), np.array([3.5]), np.zeros(1), np.array([4.5]), np.array([1.8]), 10, 4,
                   *path.segment_arrays(), 64, 36, 1.0, 0.5, 16.0, 48.0, 9.0)
+    deformed_grids(np.zeros((1, 2)), np.array([0, 1]), np.array([8.0]), np.array([3.5]), np.zeros(1), np.array([4.5]),
+                   np.array([1.8]), np.array([10]), np.array([4]), np.array([0, len(path.segment_arrays()[1])]),
+                   *(np.array(a) for a in path.segment_arrays()), 64, 36, 1.0, 0.5, 16.0, 48.0, 9.0)
