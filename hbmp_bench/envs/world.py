@@ -5,7 +5,9 @@ Goal-directed vehicles: the ego and, in a multi-agent episode (``Episode.others`
 ``ego2`` ...: each with its own start, goal and route (:class:`~hbmp_bench.envs.vehicle.GoalRoute`),
 infraction detector, end rules and episode record (:meth:`DrivingWorld.record`). The scene runs until
 every goal-directed vehicle's episode has ended; one that ends earlier leaves the simulation (it
-would stand in the others' way at its goal). A single-ego episode is the case of one.
+would stand in the others' way at its goal). A single-ego episode is the case of one. A trainer may put
+a vehicle whose episode ended back into the scene with a new start, goal and route
+(:meth:`DrivingWorld.respawn`), so the scene stays full.
 
 The world owns the simulation's lifecycle, the spawning of traffic and the one step loop every
 env runs (the single-ego env is this loop with no background agent)::
@@ -90,6 +92,8 @@ class DrivingWorld:
         """The goal-directed vehicles of the episode: ``ego`` and ``ego1`` ... (``Episode.others``)."""
         self._ended_at: dict[str, float] = {}
         self._agent_contacts: dict[str, set[str]] = {}
+        self._arriving: dict[str, Episode] = {}
+        self._started_at: dict[str, float] = {}
         self.cleared = 0
         """Vehicles SUMO drove that the episode took out of a gridlock (:data:`GRIDLOCK_WAIT_S`)."""
         self._running: set[str] = set()
@@ -162,7 +166,7 @@ class DrivingWorld:
         self.live = list(self.vehicles)
         self._running, self._committed = set(), set()
         self._ended_at, self._agent_contacts = {}, {name: set() for name in self.goal_ids}
-        self._steps, self.cleared = 0, 0
+        self._steps, self.cleared, self._arriving, self._started_at = 0, 0, {}, {}
         agents = frozenset(self.vehicles)
         self._kept = lambda vehicle_id: vehicle_id in agents or vehicle_id.startswith(SCRIPT_ACTOR_PREFIX)
         observations, infos = {}, {}
@@ -263,6 +267,7 @@ class DrivingWorld:
             self._steps += 1
             if self._steps % GRIDLOCK_CHECK_STEPS == 0:
                 self.cleared += len(self.sim.clear_junction_blockers(self._kept, GRIDLOCK_WAIT_S))
+            admitted = self._admit(events) if self._arriving else ()
             snapshot = self.sim.snapshot()
             self._committed.clear()
             for name, step_events in zip(self.live, after_sim_steps([self.vehicles[n] for n in self.live], snapshot)):
@@ -271,7 +276,7 @@ class DrivingWorld:
                     self._agent_contacts[name].update(a for a in step_events.collided_with if a in self._agent_contacts)
             if on_substep is not None:
                 on_substep()
-            if any(self.vehicles[name].end_reason for name in self.live):
+            if admitted or any(self.vehicles[name].end_reason for name in self.live):
                 break
         if last:
             for name in self.goal_ids:
@@ -279,13 +284,58 @@ class DrivingWorld:
                     self.vehicles[name].end_reason = DECISION_CAP
         return self._collect(events, ended)
 
+    def start_is_free(self, leg: Episode, clearance_m: float = CONTROLLED_SPACING_M) -> bool:
+        """No vehicle stands within ``clearance_m`` [m] of ``leg``'s start (SUMO would delay an insertion there)."""
+        actors = self.sim.snapshot()
+        xy = self.net.position(leg.start_lane, leg.start_pos)
+        cars = actors.xy[~np.asarray(actors.is_pedestrian, dtype=bool)]
+        return not len(cars) or float(np.min(np.hypot(*(cars - xy).T))) > clearance_m
+
+    def respawn(self, name: str, leg: Episode) -> None:
+        """Put the goal-directed vehicle ``name``, whose episode has ended, back at the start of ``leg``: a new
+        episode of its own (start, goal, route, timeout, rules; its ``others`` and traffic are ignored) under the
+        same id. SUMO inserts it at the next simulation step; the :meth:`step` that does so returns with its first
+        observation (``decision_required``). Choose a free start (:meth:`start_is_free`)."""
+        if name not in self._agent_contacts or name in self.live or name in self._arriving:
+            raise ValueError(f"{name!r} is not a goal-directed vehicle whose episode has ended")
+        self.sim.remove_vehicle(name)
+        start = self.net.lane(leg.start_lane)
+        self.sim.add_vehicle(name, leg.route + continuation(self.net, leg.route[-1]), lane_index=start.index,
+                             pos=leg.start_pos, speed=0.0, vtype=EGO_TYPE)
+        self.sim.hand_over(name)
+        self.sim.set_speed(name, 0.0)
+        self._arriving[name] = leg
+
+    def _admit(self, events: dict[str, StepEvents]) -> tuple[str, ...]:
+        """The respawned vehicles SUMO has inserted, each a new :class:`ControlledVehicle` of its leg, live."""
+        admitted = []
+        for name, leg in list(self._arriving.items()):
+            if self.sim.vehicle_state(name) is None:
+                continue
+            del self._arriving[name]
+            old = self.vehicles[name]
+            driver = old.driver if name == EGO_ID else self.make_driver(name, EGO_TYPE, self.goal_driver)
+            self.vehicles[name] = ControlledVehicle(
+                name, EGO_TYPE, driver, old.shared, GoalRoute(leg, self.config.fidelity, self.config.privileged),
+                InfractionDetector(self.locator, self.net.position(leg.goal_lane, leg.goal_pos), leg.success_radius_m,
+                                   self.sim.time + leg.timeout_s),
+                EndRules(on_collision=leg.end_on_collision, on_violation=leg.end_on_violation))
+            self._agent_contacts[name] = set()
+            self._ended_at.pop(name, None)
+            self._started_at[name] = self.sim.time
+            self.live.append(name)
+            events[name] = StepEvents()
+            admitted.append(name)
+        return tuple(admitted)
+
     @property
     def over(self) -> bool:
         """Every goal-directed vehicle's episode has ended (the scene's end)."""
         return all(self.vehicles[name].end_reason for name in self.goal_ids)
 
-    def _outcome(self, name: str, events: StepEvents, behavior_ended: bool) -> tuple[dict, float, dict]:
-        obs, reward, info = self.vehicles[name].outcome(events, behavior_ended)
+    def _outcome(self, name: str, events: StepEvents, behavior_ended: bool,
+                 occupancy: np.ndarray | None = None) -> tuple[dict, float, dict]:
+        obs, reward, info = self.vehicles[name].outcome(events, behavior_ended, occupancy)
         if name in self._agent_contacts:
             info["route_completion"] = self.vehicles[name].route.score.completion(
                 self.vehicles[name].end_reason == "goal")
@@ -295,12 +345,13 @@ class DrivingWorld:
     def _collect(self, events: dict[str, StepEvents], ended: set[str]):
         over = self.over
         obs, rewards, terms, truncs, infos = {}, {}, {}, {}, {}
-        for name in self.live:
+        grids = self.observer.occupancy_all([self.vehicles[name].occupancy_request() for name in self.live])
+        for name, grid in zip(self.live, grids):
             vehicle = self.vehicles[name]
             terms[name] = vehicle.terminated
             truncs[name] = vehicle.truncated or (over and not vehicle.terminated)
             last = terms[name] or truncs[name]
-            obs[name], rewards[name], infos[name] = self._outcome(name, events[name], name in ended or last)
+            obs[name], rewards[name], infos[name] = self._outcome(name, events[name], name in ended or last, grid)
         for name in list(self.live):
             infos[name]["decision_required"] = self.needs_decision(name) and not (terms[name] or truncs[name])
             if terms[name] or truncs[name]:
@@ -331,7 +382,8 @@ class DrivingWorld:
         record = v.route.score.record(
             EpisodeId(ep.suite, ep.town, ep.task, ep.index, ep.seed, self.config.fidelity, leg.route_length_m),
             agent=agent, package_version=__version__, totals=v.detector.totals, success=v.end_reason == "goal",
-            end_reason=v.end_reason, duration_s=self._ended_at.get(vehicle, self.sim.time), decisions=v.decisions,
+            end_reason=v.end_reason,
+            duration_s=self._ended_at.get(vehicle, self.sim.time) - self._started_at.get(vehicle, 0.0), decisions=v.decisions,
             traffic=self.spawned)
         if len(self.goal_ids) == 1:
             return record

@@ -47,8 +47,10 @@ class WorkerVecEnv(VecEnv):
     """The ``VecEnv`` shared by every transport: ``num_envs`` environments, each in its own process.
 
     Args:
-        config: how each worker builds its environment (id, options, reward mode, expert labels).
-        num_envs: number of workers (>= 1).
+        config: how each worker builds its environment (id, options, reward mode, expert labels, learners
+            per simulation: ``config.agents``).
+        num_envs: number of workers (>= 1); the VecEnv's ``num_envs`` is workers x ``config.agents`` (one slot
+            per learner, worker-major: worker ``i``'s learners are slots ``i * agents`` ...).
         seed: base seed; worker ``i`` starts with the seed ``SeedSequence([seed, i])`` gives, later
             episodes follow from the env's own generator, so a run is reproducible.
         device: torch device of the returned tensors.
@@ -78,11 +80,12 @@ class WorkerVecEnv(VecEnv):
         else:
             raise ValueError(f"unsupported action space {self.action_space}; valid: Discrete or a 1-D Box")
         self.config = config
-        self.num_envs = num_envs
+        self.num_workers = num_envs
+        self.num_envs = num_envs * config.agents
         self.device = device
-        self.cfg = {"env_id": config.env_id, **config.kwargs, "reward": config.reward}
+        self.cfg = {"env_id": config.env_id, **config.kwargs, "reward": config.reward, "agents": config.agents}
         self.max_episode_length = MAX_EPISODE_DECISIONS
-        self.episode_length_buf = torch.zeros(num_envs, dtype=torch.long, device=device)
+        self.episode_length_buf = torch.zeros(self.num_envs, dtype=torch.long, device=device)
         self.reply_timeout_s = reply_timeout_s
         self.episodes_done = 0
         self._finished: list[tuple[int, dict[str, Any]]] = []
@@ -90,7 +93,7 @@ class WorkerVecEnv(VecEnv):
         try:
             self._start()
             seeds = [int(np.random.SeedSequence([seed, i]).generate_state(1)[0]) for i in range(num_envs)]
-            self._replies = self._request_all("reset", seeds)
+            self._replies = self._slots(self._request_all("reset", seeds))
         except BaseException:
             self.close()
             raise
@@ -100,9 +103,14 @@ class WorkerVecEnv(VecEnv):
     def _start(self) -> None:
         raise NotImplementedError
 
-    def _request_all(self, command: str, args: list) -> list[StepReply]:
-        """Send ``(command, args[i])`` to worker ``i`` for every worker; the replies in worker order."""
+    def _request_all(self, command: str, args: list) -> list:
+        """Send ``(command, args[i])`` to worker ``i`` for every worker; the replies in worker order (each a
+        list of its slots' replies when ``config.agents`` > 1)."""
         raise NotImplementedError
+
+    def _slots(self, replies: list) -> list[StepReply]:
+        """The workers' replies, one per slot."""
+        return [r for worker in replies for r in worker] if self.config.agents > 1 else list(replies)
 
     def close(self) -> None:
         raise NotImplementedError
@@ -151,7 +159,13 @@ class WorkerVecEnv(VecEnv):
         if self._closed:
             raise RuntimeError("the VecEnv is closed")
         acts = actions.detach().cpu().numpy().reshape(self.num_envs, self.num_actions)
-        replies = self._request_all("step", [self._env_action(a) for a in acts])
+        per_slot = [self._env_action(a) for a in acts]
+        if self.config.agents > 1:
+            k = self.config.agents
+            per_worker = [per_slot[i * k:(i + 1) * k] for i in range(self.num_workers)]
+        else:
+            per_worker = per_slot
+        replies = self._slots(self._request_all("step", per_worker))
         self._replies = replies
         self._obs = self._stack_obs(replies)
         rewards = torch.tensor([r.reward for r in replies], dtype=torch.float32, device=self.device)
@@ -218,7 +232,7 @@ class SubprocVecEnv(WorkerVecEnv):
 
     def _start(self) -> None:
         context = mp.get_context(self._start_method)
-        for i in range(self.num_envs):
+        for i in range(self.num_workers):
             parent, child = context.Pipe()
             proc = context.Process(target=run_worker, args=(child, self.config), name=f"hbmp-env-{i}", daemon=True)
             proc.start()
@@ -233,7 +247,7 @@ class SubprocVecEnv(WorkerVecEnv):
             except (BrokenPipeError, OSError) as exc:
                 raise WorkerError(f"training worker {i} (pid {self._procs[i].pid}) died "
                                   f"(exit code {self._procs[i].exitcode})") from exc
-        return [self._receive(i) for i in range(self.num_envs)]
+        return [self._receive(i) for i in range(self.num_workers)]
 
     def _receive(self, i: int) -> StepReply:
         conn, proc = self._conns[i], self._procs[i]
@@ -301,7 +315,7 @@ class RayVecEnv(WorkerVecEnv):
             ray.init(address=self._address, include_dashboard=False, log_to_driver=False)
             self._started_ray = True
         actor_cls = ray.remote(num_cpus=self._cpus, max_restarts=0)(EnvActor)
-        self._actors = [actor_cls.remote(self.config) for _ in range(self.num_envs)]
+        self._actors = [actor_cls.remote(self.config) for _ in range(self.num_workers)]
 
     def _request_all(self, command: str, args: list) -> list[StepReply]:
         ray = self._ray

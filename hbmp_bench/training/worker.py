@@ -44,6 +44,8 @@ class WorkerEnvConfig:
         expert_controls: also report the control ``[a, s]`` the expert's stack would apply in the ego's
             state (the flat baseline's DAgger: :class:`~hbmp_bench.training.control_dagger.ExpertControl`);
             the env is made with the options the expert asks for, as for ``expert_labels``.
+        agents: learners per simulation: each worker's scene holds this many goal-directed vehicles, each a
+            slot of the VecEnv (:class:`SceneRunner`; 1: the single-ego :class:`EnvRunner`).
     """
 
     env_id: str = "hbmp_bench/Training-v0"
@@ -53,10 +55,15 @@ class WorkerEnvConfig:
     expert_labels: bool = False
     reward_scale: float = 1.0
     expert_controls: bool = False
+    agents: int = 1
 
     def __post_init__(self):
         if self.reward not in TRAINING_REWARD_MODES:
             raise ConfigError(f"reward must be one of {TRAINING_REWARD_MODES}, got {self.reward!r}")
+        if isinstance(self.agents, bool) or not isinstance(self.agents, int) or self.agents < 1:
+            raise ConfigError(f"agents must be an int >= 1, got {self.agents!r}")
+        if self.agents > 1 and self.expert_controls:
+            raise ConfigError("expert controls label one ego; with agents > 1 use expert_labels")
         if not self.reward_scale > 0:
             raise ConfigError(f"reward_scale must be > 0, got {self.reward_scale}")
         object.__setattr__(self, "env_kwargs", tuple(sorted((str(k), v) for k, v in dict(self.env_kwargs).items())))
@@ -213,7 +220,7 @@ class EnvActor:
     env, one libsumo) in the actor's own process, answering the same requests as a pipe worker."""
 
     def __init__(self, config: WorkerEnvConfig):
-        self.runner = EnvRunner(config)
+        self.runner = make_runner(config)
 
     def request(self, command: str, arg) -> StepReply | None:
         if command == "step":
@@ -230,7 +237,7 @@ def run_worker(conn, config: WorkerEnvConfig) -> None:
     """Process entry point: serve reset/step/close requests on ``conn`` until closed."""
     runner = None
     try:
-        runner = EnvRunner(config)
+        runner = make_runner(config)
         while True:
             command, arg = conn.recv()
             if command == "step":
@@ -255,3 +262,123 @@ def run_worker(conn, config: WorkerEnvConfig) -> None:
         if runner is not None:
             runner.close()
         conn.close()
+
+
+def make_runner(config: WorkerEnvConfig) -> "EnvRunner | SceneRunner":
+    """The runner of one worker: :class:`SceneRunner` with ``agents`` > 1, else :class:`EnvRunner`."""
+    return SceneRunner(config) if config.agents > 1 else EnvRunner(config)
+
+
+RESPAWN_ATTEMPTS = 50
+"""Draws of a new start for a finished learner before the slot waits a step and tries again."""
+
+
+class SceneRunner:
+    """``config.agents`` learners in one simulation: the goal-directed vehicles ``ego``, ``ego1`` ... of one
+    scene of the id's town (random starts and goals, SUMO's traffic and pedestrians around them), each a slot.
+
+    ``reset`` / ``step`` take and return one entry per slot, in slot order. A learner's episode ends by the
+    env's rules (its goal, a violation, its timeout), as a single ego's; the slot then gets a new start, goal
+    and route at once (``DrivingWorld.respawn``, a start no vehicle stands on), so the scene stays full and an
+    episode in the budget stays one learner's episode from its start to its end. SUMO inserts the new vehicle
+    at the next simulation step: the step after an end is the slot's *arrival* (its action is ignored, reward
+    0, and it ends there, so no return or value crosses from one episode into the next); its observation is
+    the new episode's first.
+
+    Every slot decides at every step: each vehicle must finish its decision within the step (event fidelity,
+    or the control driver); continuous behaviors (1-8 s, ending at different times) are not yet supported.
+    """
+
+    def __init__(self, config: WorkerEnvConfig):
+        import gymnasium as gym
+
+        import hbmp_bench  # noqa: F401  (registers the ids)
+        from hbmp_bench.envs.traffic_v0 import TrafficParallelEnv
+
+        self.config = config
+        options = {**gym.spec(config.env_id).kwargs, **config.kwargs}
+        if config.entry_point is not None and config.entry_point.endswith(":ControlEnv"):
+            options["ego_driver"] = "control"
+        self.experts: list | None = None
+        if config.expert_labels:
+            from hbmp_bench.agents import agent_env_kwargs, load_agent
+
+            self.experts = [load_agent("expert") for _ in range(config.agents)]
+            options = {**agent_env_kwargs(self.experts[0]), **options}
+        self.env = TrafficParallelEnv(**options, agents=config.agents, controlled="none")
+        world = self.env.config
+        if world.ego_driver != "control" and world.fidelity != "event":
+            raise ConfigError("learners share a simulation only when every vehicle decides every step: event fidelity "
+                              f"or the control driver (got fidelity={world.fidelity!r}); continuous behaviors end at "
+                              "different times")
+        self.slots = list(self.env.goal_agents)
+        self.tallies = [EpisodeTally() for _ in self.slots]
+        self._last: list[StepReply | None] = [None] * len(self.slots)
+        self._arriving: set[str] = set()
+        self._rng = np.random.default_rng()
+
+    def _reply(self, k: int, obs: dict, info: dict, new_episode: bool, **fields) -> StepReply:
+        expert_action = -1
+        if self.experts is not None:
+            if new_episode:
+                self.experts[k].reset(info)
+            expert_action = int(self.experts[k].act(obs, info))
+        mask = info.get("action_mask")
+        reply = StepReply(obs={key: np.asarray(v) for key, v in obs.items()},
+                          action_mask=None if mask is None else np.asarray(mask, dtype=np.int8),
+                          expert_action=expert_action, **fields)
+        self._last[k] = reply
+        return reply
+
+    def reset(self, seed: int | None) -> list[StepReply]:
+        self._rng = np.random.default_rng(seed)
+        obs, infos = self.env.reset(seed=seed)
+        self.tallies = [EpisodeTally() for _ in self.slots]
+        self._arriving = set()
+        return [self._reply(k, obs[v], infos[v], new_episode=True) for k, v in enumerate(self.slots)]
+
+    def step(self, actions: list) -> list[StepReply]:
+        live = set(self.env.agents)
+        if live:
+            obs, rewards, terms, truncs, infos = self.env.step({v: actions[k] for k, v in enumerate(self.slots)
+                                                                if v in live})
+        else:  # every slot is arriving: one simulation step inserts them
+            obs, rewards, terms, truncs, infos = self.env.world.step({})
+            self.env.agents = list(self.env.world.live)
+        replies = []
+        for k, v in enumerate(self.slots):
+            if v in self._arriving and v in self.env.agents:  # inserted: the new episode's first observation
+                self._arriving.discard(v)
+                self.tallies[k] = EpisodeTally()
+                reply = self._reply(k, obs[v], infos[v], new_episode=True)
+                replies.append(dataclasses.replace(reply, terminated=True))
+            elif v not in obs:  # still waiting for a free start or for SUMO's insertion
+                self._respawn(v)
+                replies.append(dataclasses.replace(self._last[k], reward=0.0, terminated=True, truncated=False,
+                                                   episode=None))
+            else:
+                reward = training_reward(self.config.reward, float(rewards[v]), infos[v], self.config.reward_scale)
+                self.tallies[k].add(float(rewards[v]), reward, infos[v])
+                ended = terms[v] or truncs[v]
+                reply = self._reply(k, obs[v], infos[v], new_episode=False, reward=reward, terminated=bool(terms[v]),
+                                    truncated=bool(truncs[v] and not terms[v]),
+                                    episode=self.tallies[k].summary(infos[v]) if ended else None)
+                if ended:
+                    self._respawn(v)
+                replies.append(reply)
+        return replies
+
+    def _respawn(self, vehicle: str) -> None:
+        """A new episode for ``vehicle`` from a free start (none found: it tries again at the next step)."""
+        world = self.env.world
+        if vehicle in self._arriving:
+            return
+        for _ in range(RESPAWN_ATTEMPTS):
+            leg = self.env.scenario.pick(self._rng)
+            if world.start_is_free(leg):
+                world.respawn(vehicle, dataclasses.replace(leg, others=()))
+                self._arriving.add(vehicle)
+                return
+
+    def close(self) -> None:
+        self.env.close()

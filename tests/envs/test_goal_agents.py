@@ -173,3 +173,32 @@ def test_batched_and_one_by_one_decisions_agree():
             break
     assert compared >= 60
     env.close()
+
+
+@pytest.mark.slow
+def test_a_respawned_vehicle_starts_a_new_episode_of_its_own():
+    """A vehicle whose episode ended, put back at a new start: SUMO inserts it at the next step, it decides
+    again, and its new record counts from its new start."""
+    env = traffic_v0.parallel_env(**{**THREE, "agents": 2, "density": "regular"})
+    obs, infos = env.reset(seed=0)
+    world = env.world
+    leg = dataclasses.replace(suite_episodes("hbmp", "Town02", "Straight")[5], others=())
+    with pytest.raises(ValueError, match="ended"):
+        world.respawn("ego1", leg)  # still driving
+    for _ in range(3000):  # ego1 drives on speed_up until its episode ends
+        obs, _, terms, truncs, infos = env.step({a: 0 for a in env.agents if infos[a]["decision_required"]})
+        if "ego1" not in env.agents:
+            break
+    first = world.record(vehicle="ego1")
+    assert first.end_reason and "ego1" not in world.live
+    ended_at = world.sim.time
+    assert world.start_is_free(leg)
+    world.respawn("ego1", leg)
+    *_, infos = world.step({a: 0 for a in world.live if world.needs_decision(a)})
+    assert "ego1" in world.live and infos["ego1"]["decision_required"]
+    assert world.vehicles["ego1"].route.episode == leg
+    assert world.vehicles["ego1"].state.lane == leg.start_lane
+    assert world.record(vehicle="ego1").end_reason == "running"
+    assert world.record(vehicle="ego1").duration_s == pytest.approx(0.0, abs=0.051)
+    assert world.sim.time == pytest.approx(ended_at + 0.1, abs=1e-6)
+    env.close()
