@@ -90,7 +90,7 @@ def resolve_init(kind: str, init: str | None) -> str | None:
 INPUT_OPTIONS = ("observation", "road_profile")
 """Env options a PPO run takes from its ``--init`` checkpoint when the command does not give them: the network's
 inputs must be what the initial actor was trained on."""
-RUN_OPTIONS = ("fidelity", "observation", "road_profile", "density")
+RUN_OPTIONS = ("fidelity", "observation", "road_profile", "density", "agents")
 """Env options a ``--resume`` takes from the checkpoint when the command does not give them: the run goes on as
 it began."""
 
@@ -165,6 +165,7 @@ def _env_config(args: argparse.Namespace, init: str | None):
             setattr(args, name, value)
     if args.fidelity is None:
         args.fidelity = DEFAULT_FIDELITY[kind]
+    args.agents = int(args.agents or 1)
     env_kwargs = {k: v for k, v in (("fidelity", args.fidelity), ("observation", args.observation),
                                     ("road_profile", args.road_profile), ("density", args.density))
                   if v is not None}
@@ -174,7 +175,8 @@ def _env_config(args: argparse.Namespace, init: str | None):
             raise UserError(f"train {kind} needs the continuous-control env hbmp_bench.envs.control_env.ControlEnv, "
                             "which this installation does not have yet")
         entry_point = CONTROL_ENV
-    return WorkerEnvConfig(env_id=args.scenario, env_kwargs=env_kwargs, entry_point=entry_point, reward=REWARD[kind])
+    return WorkerEnvConfig(env_id=args.scenario, env_kwargs=env_kwargs, entry_point=entry_point, reward=REWARD[kind],
+                           agents=args.agents)
 
 
 def _ppo_config(args: argparse.Namespace, init: str | None):
@@ -251,6 +253,10 @@ def add_commands(subparsers) -> None:
     p.add_argument("--episodes", type=int, default=None,
                    help="episode budget (default: il 3000, others 6000 as in the paper)")
     p.add_argument("--workers", type=int, default=2, help="environment processes (one SUMO each)")
+    p.add_argument("--agents", type=int, default=None, metavar="N",
+                   help="learners per simulation: N goal-directed vehicles in each worker's scene, each a slot of the "
+                        "batch (workers x N), respawned at a new start when its episode ends; every vehicle must "
+                        "decide every step (event fidelity or the control driver). Default 1: the single ego")
     p.add_argument("--backend", choices=("process", "ray"), default="process",
                    help="where the environment workers run: local processes (default) or Ray actors")
     p.add_argument("--address", default=None,
