@@ -253,30 +253,32 @@ class ObservationBuilder:
         width = np.concatenate([r[7] for r in requests])
         near = np.hypot(*(xy - np.repeat(ego_xy, counts, axis=0)).T) < cfg.rows * cfg.cell_long_m + 10.0
         bounds = np.concatenate([[0], np.cumsum(counts)])
-        step = min(cfg.cell_long_m, cfg.cell_lat_m)
-        drawn, n_long, n_lat, paths = [], [], [], []
-        for n, r in enumerate(requests):  # _footprint_sampling per vehicle, on its slice
-            mine = near[bounds[n]:bounds[n + 1]]
-            if not mine.any():
-                continue
-            drawn.append(n)
-            n_long.append(max(10, int(np.ceil(float(length[bounds[n]:bounds[n + 1]][mine].max()) / step)) + 1))
-            n_lat.append(max(4, int(np.ceil(float(width[bounds[n]:bounds[n + 1]][mine].max()) / step)) + 1))
-            paths.append(self._path(r[2], tuple(r[3]), tuple(r[8]) if len(r) > 8 else ()).segment_arrays())
-        if not drawn:
+        starts = bounds[:-1][counts > 0]  # reduceat over the vehicles with actors (the others lie between)
+        has_actors = np.flatnonzero(counts > 0)
+        near_count = np.zeros(len(requests), dtype=np.int64)
+        near_count[has_actors] = np.add.reduceat(near.astype(np.int64), starts)
+        drawn = np.flatnonzero(near_count > 0)
+        if not len(drawn):
             return out
-        keep = np.zeros(len(near), dtype=bool)
-        for n in drawn:
-            keep[bounds[n]:bounds[n + 1]] = near[bounds[n]:bounds[n + 1]]
+        longest = np.full(len(requests), -np.inf)
+        widest = np.full(len(requests), -np.inf)
+        longest[has_actors] = np.maximum.reduceat(np.where(near, length, -np.inf), starts)
+        widest[has_actors] = np.maximum.reduceat(np.where(near, width, -np.inf), starts)
+        step = min(cfg.cell_long_m, cfg.cell_lat_m)  # as _footprint_sampling, per vehicle
+        n_long = np.maximum(10, np.ceil(longest[drawn].astype(float) / step).astype(np.int64) + 1)
+        n_lat = np.maximum(4, np.ceil(widest[drawn].astype(float) / step).astype(np.int64) + 1)
+        paths = [self._path(requests[n][2], tuple(requests[n][3]),
+                            tuple(requests[n][8]) if len(requests[n]) > 8 else ()).segment_arrays() for n in drawn]
+        keep = near  # (of the drawn vehicles only)
         yaw = np.concatenate([r[5] for r in requests])
-        actor_start = np.concatenate([[0], np.cumsum([int(near[bounds[n]:bounds[n + 1]].sum()) for n in drawn])])
+        actor_start = np.concatenate([[0], np.cumsum(near_count[drawn])])
         seg_start = np.concatenate([[0], np.cumsum([len(p[1]) for p in paths])])
         arrays = [np.concatenate([p[k] for p in paths]) for k in range(10)]
         grids = deformed_grids(ego_xy[drawn], actor_start, xy[keep, 0], xy[keep, 1], yaw[keep].astype(float),
-                               length[keep].astype(float), width[keep].astype(float), np.array(n_long), np.array(n_lat),
+                               length[keep].astype(float), width[keep].astype(float), n_long, n_lat,
                                seg_start, *arrays, cfg.rows, cfg.cols, float(cfg.cell_long_m), float(cfg.cell_lat_m),
                                float(cfg.back_m), float(cfg.ahead_m), float(cfg.half_width_m))
-        for k, n in enumerate(drawn):
+        for k, n in enumerate(drawn.tolist()):
             out[n] = grids[k]
         return out
 

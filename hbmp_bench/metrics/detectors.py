@@ -22,7 +22,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hbmp_bench.metrics.geometry import LaneLocator, box_corners, boxes_overlap, crosses_line, footprint_points
+from hbmp_bench.metrics.geometry import (LaneLocator, box_corners, boxes_overlap, crosses_line, footprint_points,
+                                        footprints_points)
 from hbmp_bench.vocabulary import DETECTED_KINDS
 
 WRONG_LANE_FRACTION = 0.3
@@ -264,7 +265,7 @@ def update_all(detectors: list[InfractionDetector], frames: list[EgoFrame], ids,
             hit = boxes_overlap(boxes, box_corners(xy[cols], yaw[cols], length[cols], width[cols]))
             for r, c in zip(rows[hit].tolist(), cols[hit].tolist()):
                 hits[r].append((ids[c], bool(is_pedestrian[c])))
-    points = np.stack([footprint_points(f.xy, f.yaw, f.length, f.width) for f in frames])
+    points = footprints_points(ego_xy, [f.yaw for f in frames], [f.length for f in frames], [f.width for f in frames])
     located = detectors[0].locator.locate_all(points, [f.edge for f in frames])
     out = []
     for k, (detector, frame) in enumerate(zip(detectors, frames)):

@@ -55,15 +55,32 @@ def footprint_points(xy: np.ndarray, yaw: float, length: float, width: float, n_
     return out
 
 
+def footprints_points(xy: np.ndarray, yaw: list[float], length: list[float], width: list[float], n_long: int = 5,
+                      n_lat: int = 3) -> np.ndarray:
+    """:func:`footprint_points` of N boxes at once (N, P, 2): centres (N, 2) [m], headings, lengths and widths
+    (N,) [rad, m]; row ``n`` equal to ``footprint_points`` of box ``n``."""
+    offsets = [_footprint_offsets(float(a), float(b), n_long, n_lat) for a, b in zip(length, width)]
+    uu = np.stack([o[0] for o in offsets])
+    vv = np.stack([o[1] for o in offsets])
+    c = np.array([math.cos(y) for y in yaw])[:, None]
+    s = np.array([math.sin(y) for y in yaw])[:, None]
+    out = np.empty((len(uu), uu.shape[1], 2))
+    out[:, :, 0] = xy[:, 0:1] + c * uu - s * vv
+    out[:, :, 1] = xy[:, 1:2] + s * uu + c * vv
+    return out
+
+
 def stop_line_of(lane_shape: np.ndarray, lane_width: float) -> tuple[np.ndarray, np.ndarray]:
     """The stop line at the end of a lane: its ends (2, 2) [m] (right end, then left end, seen in the
     direction of travel) and the unit travel direction (2,) there. The line runs across the lane's full
     ``lane_width`` [m], perpendicular to the lane's last shape segment ``lane_shape`` (N, 2) [m]."""
-    end = lane_shape[-1]
-    seg = lane_shape[-1] - lane_shape[-2]
-    direction = seg / max(math.hypot(seg[0], seg[1]), 1e-9)
-    left = np.array([-direction[1], direction[0]]) * (lane_width / 2)
-    return np.stack([end - left, end + left]), direction
+    ex, ey = float(lane_shape[-1, 0]), float(lane_shape[-1, 1])
+    sx, sy = ex - float(lane_shape[-2, 0]), ey - float(lane_shape[-2, 1])
+    norm = max(math.hypot(sx, sy), 1e-9)
+    dx, dy = sx / norm, sy / norm
+    half = lane_width / 2
+    lx, ly = -dy * half, dx * half  # the left offset, in scalars: R_t and the detectors ask every step
+    return np.array([[ex - lx, ey - ly], [ex + lx, ey + ly]]), np.array([dx, dy])
 
 
 def crosses_line(p: np.ndarray, q: np.ndarray, ends: np.ndarray, direction: np.ndarray) -> bool:
