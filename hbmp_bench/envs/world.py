@@ -310,7 +310,8 @@ class DrivingWorld:
         """The respawned vehicles SUMO has inserted, each a new :class:`ControlledVehicle` of its leg, live."""
         admitted = []
         for name, leg in list(self._arriving.items()):
-            if self.sim.vehicle_state(name) is None:
+            state = self.sim.vehicle_state(name)
+            if state is None or not state.lane:  # not on the road yet: SUMO waits for room to insert it
                 continue
             del self._arriving[name]
             old = self.vehicles[name]
