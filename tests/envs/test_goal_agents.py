@@ -202,3 +202,33 @@ def test_a_respawned_vehicle_starts_a_new_episode_of_its_own():
     assert world.record(vehicle="ego1").duration_s == pytest.approx(0.0, abs=0.051)
     assert world.sim.time == pytest.approx(ended_at + 0.1, abs=1e-6)
     env.close()
+
+
+@pytest.mark.slow
+def test_a_scene_runs_as_one_episode_with_one_call_per_decision():
+    from hbmp_bench.agents.scene import SceneAgent
+    from hbmp_bench.envs.scene_env import SceneEnv
+    from hbmp_bench.rollout import run_episode
+
+    options = {k: v for k, v in THREE.items() if k != "controlled"}
+    expert = SceneAgent("expert")
+    env = SceneEnv(**options, **expert.env_kwargs)
+    run = run_episode(env, expert, seed=0)
+    assert run.ended and not expert.batched
+    assert len({id(a) for a in expert._agents.values()}) == 3  # one expert per vehicle (its own state)
+    records = run.info["hbmp_record"]
+    assert [r["vehicle"] for r in records] == ["ego", "ego1", "ego2"] and all(r["success"] for r in records)
+    assert [r.to_dict() for r in env.records()] == records
+    env.close()
+
+    il = SceneAgent("il")
+    calls = []
+    batch = il.prototype.act_batch
+    il.prototype.act_batch = lambda obs, infos: calls.append(sorted(obs)) or batch(obs, infos)
+    env = SceneEnv(**options, **il.env_kwargs, max_cycles=40)
+    run = run_episode(env, il, seed=0)
+    assert il.batched and len(calls) == run.decisions == 40 and calls[0] == ["ego", "ego1", "ego2"]
+    assert run.ended and run.info["hbmp_record"][0]["end_reason"] == "decision_cap"
+    env.close()
+    with pytest.raises(TypeError, match="controlled"):
+        SceneEnv(**options, controlled=2)
