@@ -239,3 +239,24 @@ def test_the_multi_suite_holds_eight_vehicles_per_scene():
     spec = get_suite("multi")
     assert spec.agents == 8 and spec.tasks == ("NavigationDynamic",)
     assert all(len(e.agents) == 8 for town in spec.towns for e in suite_episodes("multi", town, "NavigationDynamic"))
+
+
+@pytest.mark.slow
+def test_an_audit_replays_a_whole_scene_and_finds_a_changed_vehicle(scenes, tmp_path):
+    from hbmp_bench.evaluation.audit import audit
+
+    _, result = scenes
+    doc = _document(result)
+    path = write_json(tmp_path / "expert.event.json", doc)
+    honest = audit(path, "expert", 1, seed=1, limits=SCENE)
+    assert honest.ok, honest.lines()
+    assert sorted(e.key[3] for e in honest.episodes) == ["ego", "ego1", "ego2"]  # one scene, every vehicle
+    scene = honest.episodes[0].key[2]
+    for row in doc["episodes"]:
+        if row["episode"] == scene and row["vehicle"] == "ego2":
+            row["decisions"] += 1  # a claim the replay contradicts (no other check sees it)
+    doc = {**doc, **results_document(tiny_scene.NAME, "expert", _records(doc), towns=["Town01"], tasks=["Straight"],
+                                     episodes=[0, 1], fidelity="event", privileged=True)}
+    changed = audit(write_json(tmp_path / "expert.event.json", doc), "expert", 1, seed=1, limits=SCENE)
+    assert not changed.ok
+    assert [e.key[3] for e in changed.episodes if e.mismatches] == ["ego2"]
