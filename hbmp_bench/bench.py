@@ -578,12 +578,14 @@ def _jobs(cfg: BenchConfig) -> tuple[list[tuple[str, str | None, Any]], str, str
     """(kind, town, what) of every measurement ``cfg`` asks for, in the order they run (``agents`` jobs: (kind,
     fidelity, agent count)); and why highway-env and Ray are skipped ("" where they are not)."""
     jobs = [("raw", t, None) for t in cfg.towns] + [("env", t, f) for t in cfg.towns for f in FIDELITIES]
-    jobs += [("agents", f, n) for f in FIDELITIES for n in cfg.agent_counts]
     highway_missing = _missing("highway_env") if cfg.highway_seconds > 0 else ""
     jobs += [("highway", None, e) for e in (HIGHWAY_ENVS if cfg.highway_seconds > 0 and not highway_missing else ())]
     jobs += [("scaling", None, n) for n in cfg.scaling_workers]
     ray_missing = _missing("ray") if cfg.ray_workers else ""
     jobs += [("ray", None, n) for n in (cfg.ray_workers if not ray_missing else ())]
+    # after the workers: a spawned worker's ru_maxrss starts at this process's resident size when it is
+    # started (Linux keeps the pre-exec high-water mark), and the multi-agent runs grow it (32 agents, torch)
+    jobs += [("agents", f, n) for f in FIDELITIES for n in cfg.agent_counts]
     jobs += [("import", None, cfg.import_repeats)] if cfg.import_repeats else []
     return jobs, highway_missing, ray_missing
 
