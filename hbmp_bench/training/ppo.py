@@ -485,7 +485,12 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
         runner.logger = RunLogger(runner, after_iteration)
         runner.current_learning_iteration = progress.iterations
         try:
-            runner.learn(num_learning_iterations=10**9)
+            if env.asynchronous:  # learners of a scene in continuous fidelity: each decides when its behavior ends
+                from hbmp_bench.training.async_rollout import learn_async
+
+                learn_async(runner, env, cfg["num_steps_per_env"], after_iteration)
+            else:
+                runner.learn(num_learning_iterations=10**9)
         except BudgetReached:
             pass
         final = session.finish(checkpoint())

@@ -33,7 +33,8 @@ from tensordict import TensorDict
 
 from hbmp_bench.errors import ConfigError
 from hbmp_bench.training.run import BACKENDS
-from hbmp_bench.training.worker import EnvActor, StepReply, WorkerEnvConfig, make_env, run_worker
+from hbmp_bench.training.worker import (EnvActor, StepReply, WorkerEnvConfig, asynchronous_scene, make_env,
+                                        run_worker)
 
 MAX_EPISODE_DECISIONS = 1_000_000
 """``max_episode_length`` reported to rsl-rl: episodes end by the env's own timeout, not here."""
@@ -80,6 +81,8 @@ class WorkerVecEnv(VecEnv):
         else:
             raise ValueError(f"unsupported action space {self.action_space}; valid: Discrete or a 1-D Box")
         self.config = config
+        self.asynchronous = asynchronous_scene(config)
+        """The learners of a scene decide at different times: stepped by :meth:`step_slots`, not :meth:`step`."""
         self.num_workers = num_envs
         self.num_envs = num_envs * config.agents
         self.device = device
@@ -158,6 +161,8 @@ class WorkerVecEnv(VecEnv):
         """
         if self._closed:
             raise RuntimeError("the VecEnv is closed")
+        if self.asynchronous:
+            raise RuntimeError("the learners of an asynchronous scene decide at different times: step_slots steps it")
         acts = actions.detach().cpu().numpy().reshape(self.num_envs, self.num_actions)
         per_slot = [self._env_action(a) for a in acts]
         if self.config.agents > 1:
@@ -190,6 +195,34 @@ class WorkerVecEnv(VecEnv):
                 for key in ("r_T", "r_T_plus_r_t", "success", "infractions", "length")
             }
         return self._obs, rewards, dones, extras
+
+    def step_slots(self, actions: dict[int, np.ndarray]) -> list[tuple[int, StepReply]]:
+        """One step of every worker of an asynchronous scene (:attr:`asynchronous`): ``actions`` for the slots
+        that decide (global slot index -> (num_actions,) action); returns ``[(slot, reply)]`` of the slots
+        whose transition completed or that must decide (``StepReply.completes`` / ``decides``), and counts
+        the finished episodes (:meth:`pop_episodes`)."""
+        if self._closed:
+            raise RuntimeError("the VecEnv is closed")
+        k = self.config.agents
+        per_worker = [{} for _ in range(self.num_workers)]
+        for slot, action in actions.items():
+            per_worker[slot // k][slot % k] = self._env_action(np.asarray(action).reshape(self.num_actions))
+        out = []
+        for i, replies in enumerate(self._request_all("step", per_worker)):
+            out.extend((i * k + slot, reply) for slot, reply in replies)
+        episodes = [(slot, r.episode) for slot, r in out if r.episode is not None]
+        self._finished.extend(episodes)
+        self.episodes_done += len(episodes)
+        return out
+
+    def stack(self, replies: list[StepReply]) -> TensorDict:
+        """The observations of ``replies`` as one TensorDict (batch: their number), the groups of :meth:`step`."""
+        groups = {key: torch.as_tensor(np.stack([r.obs[key] for r in replies]), dtype=torch.float32,
+                                       device=self.device) for key in replies[0].obs}
+        if replies[0].action_mask is not None:
+            groups["action_mask"] = torch.as_tensor(np.stack([r.action_mask for r in replies]), dtype=torch.float32,
+                                                    device=self.device)
+        return TensorDict(groups, batch_size=[len(replies)], device=self.device)
 
     @property
     def expert_actions(self) -> torch.Tensor:

@@ -102,13 +102,15 @@ class EpisodeTally:
     reward: float = 0.0
     length: int = 0
 
-    def add(self, env_reward: float, train_reward: float, info: dict) -> None:
-        """Add one decision: r_T and r_k from ``info["reward_components"]`` (else r_T = env reward)."""
+    def add(self, env_reward: float, train_reward: float, info: dict, decision: bool = True) -> None:
+        """Add one step: r_T and r_k from ``info["reward_components"]`` (else r_T = env reward); ``decision``:
+        the step ended one of the agent's decisions (False: a step of an asynchronous scene that another
+        vehicle's decision ended, while this one's behavior runs on)."""
         parts = info.get("reward_components", {})
         self.r_T += float(parts.get("r_T", env_reward))
         self.r_k += float(parts.get("r_k", 0.0))
         self.reward += train_reward
-        self.length += 1
+        self.length += int(decision)
 
     def summary(self, info: dict) -> dict[str, Any]:
         """One training-log row (without the episode counter): rewards, outcome, infractions, length."""
@@ -148,6 +150,9 @@ class StepReply:
     episode: the finished episode's summary when the step ended one.
     expert_control: (2,) float32 the control the expert's stack applies in ``obs``'s state (None when
         ``expert_controls`` is off).
+    completes / decides: an asynchronous scene's slot (:meth:`SceneRunner.step` with a dict): the reply
+        completes the slot's last transition (``reward`` since its last decision, the ends) / asks for a
+        decision on ``obs``. Both True in every other reply.
     """
 
     obs: dict[str, np.ndarray]
@@ -158,6 +163,8 @@ class StepReply:
     expert_action: int = -1
     episode: dict[str, Any] | None = None
     expert_control: np.ndarray | None = None
+    completes: bool = True
+    decides: bool = True
 
 
 class EnvRunner:
@@ -269,6 +276,19 @@ def make_runner(config: WorkerEnvConfig) -> "EnvRunner | SceneRunner":
     return SceneRunner(config) if config.agents > 1 else EnvRunner(config)
 
 
+def asynchronous_scene(config: WorkerEnvConfig) -> bool:
+    """Whether the learners of a worker's scene decide at different times: several learners with the
+    behavior driver in continuous fidelity (behaviors of 1-8 s); event fidelity and the control driver
+    decide every 0.1 s step."""
+    import gymnasium as gym
+
+    import hbmp_bench  # noqa: F401  (registers the ids)
+
+    options = {**gym.spec(config.env_id).kwargs, **config.kwargs}
+    control = (config.entry_point or "").endswith(":ControlEnv") or options.get("ego_driver") == "control"
+    return config.agents > 1 and not control and (options.get("fidelity") or "continuous") != "event"
+
+
 RESPAWN_ATTEMPTS = 50
 """Draws of a new start for a finished learner before the slot waits a step and tries again."""
 
@@ -285,8 +305,12 @@ class SceneRunner:
     0, and it ends there, so no return or value crosses from one episode into the next); its observation is
     the new episode's first.
 
-    Every slot decides at every step: each vehicle must finish its decision within the step (event fidelity,
-    or the control driver); continuous behaviors (1-8 s, ending at different times) are not yet supported.
+    Synchronous scenes (event fidelity, the control driver: every vehicle decides at every step) take and
+    return a list, one entry per slot. Asynchronous ones (continuous behaviors, 1-8 s, ending at different
+    times: :attr:`asynchronous`) take ``{slot: action}`` for the slots that decide and return ``[(slot,
+    reply)]`` for the slots whose transition completed or that must decide now (``StepReply.completes`` /
+    ``decides``); a slot running its behavior is absent and gathers its rewards until its next reply. The
+    arrival after an end is then a reply that decides without completing anything.
     """
 
     def __init__(self, config: WorkerEnvConfig):
@@ -306,12 +330,10 @@ class SceneRunner:
             self.experts = [load_agent("expert") for _ in range(config.agents)]
             options = {**agent_env_kwargs(self.experts[0]), **options}
         self.env = TrafficParallelEnv(**options, agents=config.agents, controlled="none")
-        world = self.env.config
-        if world.ego_driver != "control" and world.fidelity != "event":
-            raise ConfigError("learners share a simulation only when every vehicle decides every step: event fidelity "
-                              f"or the control driver (got fidelity={world.fidelity!r}); continuous behaviors end at "
-                              "different times")
+        self.asynchronous = asynchronous_scene(config)
+        """Behaviors end at different times (continuous fidelity): slots decide when theirs ends."""
         self.slots = list(self.env.goal_agents)
+        self._gathered = [0.0] * len(self.slots)
         self.tallies = [EpisodeTally() for _ in self.slots]
         self._last: list[StepReply | None] = [None] * len(self.slots)
         self._arriving: set[str] = set()
@@ -337,14 +359,52 @@ class SceneRunner:
         self._arriving = set()
         return [self._reply(k, obs[v], infos[v], new_episode=True) for k, v in enumerate(self.slots)]
 
-    def step(self, actions: list) -> list[StepReply]:
+    def step(self, actions):
+        """One step of the scene: see the class docstring (a list for a synchronous scene, a dict for an
+        asynchronous one)."""
+        if self.asynchronous:
+            return self._step_async(actions)
+        return self._step_sync(actions)
+
+    def _advance(self, actions: dict[str, Any]):
         live = set(self.env.agents)
         if live:
-            obs, rewards, terms, truncs, infos = self.env.step({v: actions[k] for k, v in enumerate(self.slots)
-                                                                if v in live})
-        else:  # every slot is arriving: one simulation step inserts them
-            obs, rewards, terms, truncs, infos = self.env.world.step({})
-            self.env.agents = list(self.env.world.live)
+            return self.env.step({v: a for v, a in actions.items() if v in live})
+        out = self.env.world.step({})  # every slot is arriving: one simulation step inserts them
+        self.env.agents = list(self.env.world.live)
+        return out
+
+    def _step_async(self, actions: dict[int, Any]) -> list[tuple[int, StepReply]]:
+        obs, rewards, terms, truncs, infos = self._advance({self.slots[k]: a for k, a in actions.items()})
+        out = []
+        for k, v in enumerate(self.slots):
+            if v in self._arriving and v in self.env.agents:  # inserted: decides on its new episode's first obs
+                self._arriving.discard(v)
+                self.tallies[k], self._gathered[k] = EpisodeTally(), 0.0
+                out.append((k, dataclasses.replace(self._reply(k, obs[v], infos[v], new_episode=True),
+                                                   completes=False)))
+                continue
+            if v not in obs:
+                if v not in self._arriving:
+                    self._respawn(v)  # no free start at its end: try again
+                continue
+            reward = training_reward(self.config.reward, float(rewards[v]), infos[v], self.config.reward_scale)
+            ended = terms[v] or truncs[v]
+            completes = ended or infos[v]["decision_required"]
+            self.tallies[k].add(float(rewards[v]), reward, infos[v], decision=completes)
+            self._gathered[k] += reward
+            if completes:
+                reply = self._reply(k, obs[v], infos[v], new_episode=False, reward=self._gathered[k],
+                                    terminated=bool(terms[v]), truncated=bool(truncs[v] and not terms[v]),
+                                    episode=self.tallies[k].summary(infos[v]) if ended else None, decides=not ended)
+                self._gathered[k] = 0.0
+                out.append((k, reply))
+                if ended:
+                    self._respawn(v)
+        return out
+
+    def _step_sync(self, actions: list) -> list[StepReply]:
+        obs, rewards, terms, truncs, infos = self._advance({v: actions[k] for k, v in enumerate(self.slots)})
         replies = []
         for k, v in enumerate(self.slots):
             if v in self._arriving and v in self.env.agents:  # inserted: the new episode's first observation

@@ -1,6 +1,6 @@
 """Many learners per simulation: the goal-directed vehicles of one scene as slots of the training VecEnv
 (``WorkerEnvConfig.agents``, :class:`~hbmp_bench.training.worker.SceneRunner`), each respawned at a new start
-when its episode ends."""
+when its episode ends; continuous scenes: ``test_async_rollout``)."""
 
 import numpy as np
 import pytest
@@ -8,7 +8,7 @@ import torch
 
 from hbmp_bench.errors import ConfigError
 from hbmp_bench.training.vec_env import make_vec_env
-from hbmp_bench.training.worker import SceneRunner, WorkerEnvConfig
+from hbmp_bench.training.worker import SceneRunner, WorkerEnvConfig, asynchronous_scene
 
 pytestmark = pytest.mark.slow
 
@@ -40,11 +40,20 @@ def test_every_learner_is_a_slot_and_a_finished_one_comes_back():
         env.close()
 
 
-def test_learners_share_a_simulation_only_when_all_decide_every_step():
-    with pytest.raises(ConfigError, match="every vehicle decides every step"):
-        SceneRunner(WorkerEnvConfig(env_kwargs={"fidelity": "continuous"}, agents=2))
+def test_a_scene_is_asynchronous_only_with_continuous_behaviors():
+    continuous = WorkerEnvConfig(env_kwargs={"fidelity": "continuous"}, agents=2)
+    assert asynchronous_scene(continuous)
+    assert not asynchronous_scene(WorkerEnvConfig(env_kwargs={"fidelity": "event"}, agents=2))
+    assert not asynchronous_scene(WorkerEnvConfig(env_kwargs={"fidelity": "continuous"}, agents=1))
+    assert not asynchronous_scene(WorkerEnvConfig(entry_point="hbmp_bench.envs.control_env:ControlEnv", agents=2))
     with pytest.raises(ConfigError, match="agents"):
         WorkerEnvConfig(agents=0)
+    env = make_vec_env(continuous, 1, seed=0)
+    try:
+        with pytest.raises(RuntimeError, match="step_slots"):
+            env.step(torch.zeros(2, 1))
+    finally:
+        env.close()
 
 
 def test_a_scene_of_learners_seeds_like_one():
