@@ -797,7 +797,8 @@ def write_plot(result: dict, path: str | Path) -> Path:
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, metadata={"Date": None} if path.suffix == ".svg" else None)
+    with plt.rc_context({"svg.fonttype": "none"}):  # text as text: a small file whose labels can be searched
+        fig.savefig(path, metadata={"Date": None} if path.suffix == ".svg" else None)
     plt.close(fig)
     return path
 
