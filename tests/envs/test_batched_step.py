@@ -42,9 +42,9 @@ def _equal(a, b, where=""):
         assert a == b, f"{where}: {a!r} != {b!r}"
 
 
-def _run(fidelity: str, steps: int) -> list:
-    env = traffic_v0.parallel_env(town="Town01", task="NavigationDynamic", controlled=6, density="dense",
-                                  fidelity=fidelity, background_fidelity=fidelity)
+def _run(fidelity: str, steps: int, agents: int = 1) -> list:
+    env = traffic_v0.parallel_env(town="Town01", task="NavigationDynamic", controlled=6 if agents == 1 else "none",
+                                  agents=agents, density="dense", fidelity=fidelity, background_fidelity=fidelity)
     rng = np.random.default_rng(7)
     out = []
     try:
@@ -61,12 +61,13 @@ def _run(fidelity: str, steps: int) -> list:
     return out
 
 
-@pytest.mark.parametrize("fidelity, steps", [("event", 120), ("continuous", 25)])
-def test_batched_step_equals_one_vehicle_at_a_time(monkeypatch, fidelity, steps):
-    batched = _run(fidelity, steps)
+@pytest.mark.parametrize("fidelity, steps, agents", [("event", 120, 1), ("continuous", 25, 1), ("event", 80, 5)])
+def test_batched_step_equals_one_vehicle_at_a_time(monkeypatch, fidelity, steps, agents):
+    """The ego and 6 circulating agents, or 5 goal-directed agents (``ego`` ... ``ego4``)."""
+    batched = _run(fidelity, steps, agents)
     monkeypatch.setattr(world_module, "after_sim_steps", _one_by_one)
     monkeypatch.setattr(ObservationBuilder, "occupancy_all", _occupancy_one_by_one)
-    single = _run(fidelity, steps)
+    single = _run(fidelity, steps, agents)
     assert len(batched) == len(single) > 1
     for k, (a, b) in enumerate(zip(batched, single)):
         _equal(a, b, f"step {k}")
