@@ -257,30 +257,27 @@ def _instrumented(env):
     import hbmp_bench.planning.executor as executor_module
 
     from hbmp_bench.envs.privileged import PrivilegedScene
-    from hbmp_bench.metrics.detectors import InfractionDetector
 
     world = env.world
     timers = {"sumo_step": _Timer(world.sim.step), "snapshot": _Timer(world.sim.snapshot),
               "driver_before_step": _Timer(world.ego_driver.before_step),
               "planner": _Timer(executor_module.plan), "road_profile": _Timer(vehicle_module.road_profile),
-              "detectors": _Timer(InfractionDetector.update), "occupancy": _Timer(world.observer.occupancy),
+              "detectors": _Timer(vehicle_module.update_all), "occupancy": _Timer(world.observer.occupancy),
               "privileged_scene": _Timer(PrivilegedScene.fields)}
-    saved = executor_module.plan, vehicle_module.road_profile
+    saved = executor_module.plan, vehicle_module.road_profile, vehicle_module.update_all
     world.sim.step, world.sim.snapshot = timers["sumo_step"], timers["snapshot"]
     world.ego_driver.before_step = timers["driver_before_step"]
     world.observer.occupancy = timers["occupancy"]
     executor_module.plan, vehicle_module.road_profile = timers["planner"], timers["road_profile"]
-    detector_timer = timers["detectors"]
-    InfractionDetector.update = lambda self, *args: detector_timer(self, *args)  # the detector is per episode
+    vehicle_module.update_all = timers["detectors"]  # every vehicle's detectors, one call per SUMO step
     scene_timer = timers["privileged_scene"]
-    PrivilegedScene.fields = lambda self, *args, **kwargs: scene_timer(self, *args, **kwargs)  # likewise
+    PrivilegedScene.fields = lambda self, *args, **kwargs: scene_timer(self, *args, **kwargs)  # one per episode
     try:
         yield timers
     finally:
         del world.sim.step, world.sim.snapshot, world.ego_driver.before_step, world.observer.occupancy
-        InfractionDetector.update = detector_timer.fn
         PrivilegedScene.fields = scene_timer.fn
-        executor_module.plan, vehicle_module.road_profile = saved
+        executor_module.plan, vehicle_module.road_profile, vehicle_module.update_all = saved
 
 
 def _make_env(cfg: BenchConfig, town: str, fidelity: str, **agent_env: Any):

@@ -31,6 +31,8 @@ def test_bench_quick_writes_complete_json(tmp_path, capsys):
         assert row["cpu_ratio_to_raw"] == pytest.approx(row["sim_steps_per_cpu_s"] / raw["steps_per_cpu_s"], abs=1e-3)
         assert row["latency"]["sumo_step"]["n"] >= row["sim_steps"]
         assert row["latency"]["occupancy"]["n"] >= row["decisions"]
+        # one batched detector call per SUMO step of env.step (a reset's first step has no vehicle to judge)
+        assert row["sim_steps"] <= row["latency"]["detectors"]["n"] <= row["latency"]["sumo_step"]["n"]
         assert row["warm_up_s"] >= 0
     assert town["event"]["sim_steps"] == town["event"]["decisions"]  # one 0.1 s step per event decision
     assert town["continuous"]["latency"]["planner"]["n"] > 0
