@@ -42,7 +42,7 @@ class WorkerEnvConfig:
             info, never the learner's observation, holds the privileged scene).
         reward_scale: factor on the training reward (the CSV log keeps r_T and r_k unscaled).
         expert_controls: also report the control ``[a, s]`` the expert's stack would apply in the ego's
-            state (the flat baseline's DAgger: :class:`~hbmp_bench.training.control_dagger.ExpertControl`);
+            state (the flat baseline's DAgger: :class:`~hbmp_bench.training.expert_control.ExpertControl`);
             the env is made with the options the expert asks for, as for ``expert_labels``.
         agents: learners per simulation: each worker's scene holds this many goal-directed vehicles, each a
             slot of the VecEnv (:class:`SceneRunner`; 1: the single-ego :class:`EnvRunner`).
@@ -178,7 +178,7 @@ class EnvRunner:
             expert = load_agent("expert")
             config = dataclasses.replace(config, env_kwargs={**agent_env_kwargs(expert), **config.kwargs})
             if config.expert_controls:
-                from hbmp_bench.training.control_dagger import ExpertControl
+                from hbmp_bench.training.expert_control import ExpertControl
 
                 self.controls = ExpertControl(expert)
             else:

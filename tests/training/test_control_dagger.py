@@ -18,7 +18,8 @@ from hbmp_bench.policies.checkpoints import load_checkpoint
 from hbmp_bench.policies.networks import COMPACT_NETWORK
 from hbmp_bench.sim.sumo import EGO_TYPE
 from hbmp_bench.training.commands import CONTROL_ENV, resolve_init
-from hbmp_bench.training.control_dagger import DaggerControlConfig, ExpertControl, train_control_dagger
+from hbmp_bench.training.control_dagger import DaggerControlConfig, train_control_dagger
+from hbmp_bench.training.expert_control import ExpertControl
 from hbmp_bench.training.dagger import DemoDataset
 from hbmp_bench.training.run import RunConfig
 from hbmp_bench.training.runlog import read_csv
