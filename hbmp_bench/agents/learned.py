@@ -1,4 +1,5 @@
-"""Learned agents: il (DAgger), hbmp (PPO, r_k + r_T), hbmp-s (PPO, r_T only) and flat (PPO on controls).
+"""Learned agents: il (DAgger), hbmp (PPO, r_k + r_T), hbmp-s (PPO, r_T only), flat (PPO on controls) and
+flat-il (DAgger on the expert's controls, CIL).
 
 Each loads a checkpoint shipped in ``hbmp_bench/agents/checkpoints/<name>.pt`` (with a model card
 ``<name>.md`` beside it), produced by the package's own ``hbmp-bench train <name>``; any other
@@ -32,6 +33,8 @@ TRAIN_COMMANDS = {
     "hbmp": "hbmp-bench train hbmp --episodes 6000 --workers 2 --seed 0 --density regular --out runs/hbmp",
     "hbmp-s": "hbmp-bench train hbmp-s --episodes 6000 --workers 2 --seed 0 --density regular --out runs/hbmp-s",
     "flat": "hbmp-bench train flat --episodes 1000 --workers 2 --seed 0 --density regular --out runs/flat",
+    "flat-il": "hbmp-bench train flat-il --episodes 200 --workers 1 --seed 0 --density regular --validate-every 50 "
+               "--validate-episodes 5 --out runs/flat-il",
 }
 """How each shipped checkpoint is (re)produced; the model card beside it has the exact command used."""
 
@@ -69,7 +72,7 @@ class LearnedAgent:
         device: torch device.
 
     Attributes:
-        kind: ``il``, ``hbmp``, ``hbmp-s`` or ``flat``.
+        kind: ``il``, ``hbmp``, ``hbmp-s``, ``flat`` or ``flat-il``.
         env_kwargs: the observation options the policy needs from the env (``observation``), to
             pass to ``make``; empty for the default deformed M_t.
         trained_env: every environment option of its training run (id, fidelity, density ...).
@@ -92,7 +95,7 @@ class LearnedAgent:
         self.env_kwargs = {k: v for k, v in self.trained_env.items() if k in OBSERVATION_OPTIONS}
         self.discrete = model["action_space"] == "discrete"
         self.env_factory = None if self.discrete else "hbmp_bench.envs.control_env:ControlEnv"
-        """The env a control policy (flat) needs; None: the behavior env."""
+        """The env a control policy (flat, flat-il) needs; None: the behavior env."""
         mask_group = model["actor"].get("action_mask_group")
         self._groups = list(model["obs_groups"]["actor"]) + ([mask_group] if mask_group else [])
         self._torch = torch
@@ -113,7 +116,8 @@ class LearnedAgent:
         return TensorDict(groups, batch_size=[1], device=self.device)
 
     def act(self, observation: dict[str, Any], info: dict[str, Any]):
-        """The behavior index (int) for behavior policies; the control vector (np.ndarray) for ``flat``."""
+        """The behavior index (int) for behavior policies; the control vector (np.ndarray) for ``flat`` and
+        ``flat-il``."""
         if self.discrete:
             probabilities = self.behavior_probabilities(observation, info)
             mask = np.asarray(info.get("action_mask", np.ones_like(probabilities)), dtype=bool)
