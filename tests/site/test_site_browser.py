@@ -38,6 +38,11 @@ def entries(slug: str) -> dict[str, dict]:
     return {p.name: json.loads(p.read_text(encoding="utf-8")) for p in board_folders()[slug].glob("*.json")}
 
 
+def covered(doc: dict) -> set[tuple[str, str]]:
+    """The (town, task) cells an entry has episodes in (a subset entry covers only some)."""
+    return {(e["town"], e["task"]) for e in doc["episodes"]}
+
+
 def rows(page, table: str, visible_only: bool = True) -> list[dict]:
     """The rows of a table as ``{"attrs": data-*, "cells": {data-field: text}, "texts": [cell texts]}``."""
     return page.evaluate(
@@ -108,7 +113,7 @@ def test_sorting_orders_the_rows(site, browser_page):
     km = page.locator("#breakdown thead th", has_text="km driven").first
     km.click()
     driven = [float(r["cells"]["km_driven"]) for r in rows(page, "breakdown")]
-    assert driven == sorted(driven) and len(driven) == 20 * len(files)
+    assert driven == sorted(driven) and len(driven) == sum(len(covered(d)) for d in files.values())
     assert not browser_page.errors, browser_page.errors
 
 
@@ -130,10 +135,10 @@ def test_filters_keep_the_rows_they_name(site, browser_page):
     page.select_option(f"{breakdown} select[name=town]", "Town03")
     page.select_option(f"{breakdown} select[name=task]", "NavigationDynamic")
     shown = rows(page, "breakdown")
-    assert len(shown) == len(files)
+    assert len(shown) == sum(("Town03", "NavigationDynamic") in covered(d) for d in files.values())
     assert all(r["cells"]["town"] == "Town03" and r["cells"]["task"] == "Nav. dynamic" for r in shown)
     page.select_option(f"{breakdown} select[name=task]", "")
-    assert len(rows(page, "breakdown")) == 4 * len(files)
+    assert len(rows(page, "breakdown")) == sum(sum(t == "Town03" for t, _ in covered(d)) for d in files.values())
 
     page = browser_page.open(site / "board-carla-hbmp.html")  # subsets: a town filter keeps the entries covering it
     page.select_option("form[data-for=entries] select[name=town]", "CARLA_Town02")
@@ -202,7 +207,7 @@ def test_paired_comparisons_are_the_reports(site, browser_page):
     paired = build_report([BOARDS / "hbmp"])["paired"]
     page = browser_page.open(site / "board-hbmp.html")
     shown = {(r["cells"]["first"], r["cells"]["second"]): r["cells"] for r in rows(page, "paired")}
-    assert len(shown) == len(paired) == 15
+    assert len(shown) == len(paired) >= 15
     for (first, second), r in paired.iterrows():
         cells = shown[(first, second)]
         assert int(cells["only_first"]) == r["only_first"] and int(cells["only_second"]) == r["only_second"]
@@ -259,9 +264,10 @@ def test_agent_pages_show_curves_entries_and_replayable_failures(site, browser_p
             doc = next(d for slug in folders for d in entries(slug).values()
                        if d["agent"] == agent and d["suite"] == args.suite and d["fidelity"] == args.fidelity
                        and r["attrs"]["board"] in (slug,))
-            episode = next(e for e in doc["episodes"] if e["town"] == r["cells"]["town"]
-                           and e["episode"] == args.episode and TASK_LABELS[e["task"]] == r["cells"]["task"])
-            assert not episode["success"] and int(r["cells"]["seed"]) == episode["seed"]
+            # the episode's row; a scene suite's episode has one per vehicle, and the row is a failed vehicle's
+            matching = [e for e in doc["episodes"] if e["town"] == r["cells"]["town"]
+                        and e["episode"] == args.episode and TASK_LABELS[e["task"]] == r["cells"]["task"]]
+            assert any(not e["success"] and int(r["cells"]["seed"]) == e["seed"] for e in matching)
     assert not browser_page.errors, browser_page.errors
 
 
