@@ -45,7 +45,7 @@ import numpy as np
 import torch
 
 from hbmp_bench.errors import ConfigError, UserError
-from hbmp_bench.training.dagger import DemoDataset, expert_probability, save_datasets
+from hbmp_bench.training.dagger import DemoDataset, add_states, expert_probability, save_datasets
 from hbmp_bench.training.run import RunConfig
 from hbmp_bench.training.runlog import DAGGER_COLUMNS, EPISODE_COLUMNS, ROUND_COLUMNS
 from hbmp_bench.training.session import TrainingSession
@@ -263,12 +263,7 @@ class _ControlLearner:
                                          and rng.random() < config.holdout_fraction)
             if session.budget_reached:
                 break
-        for states, y, hold in pending:
-            if len(self.holdout) >= config.holdout_capacity:
-                hold = np.zeros_like(hold)
-            self.train_set.add({k: v[~hold] for k, v in states.items()}, y[~hold])
-            if hold.any():
-                self.holdout.add({k: v[hold] for k, v in states.items()}, y[hold])
+        add_states(pending, self.train_set, self.holdout, config.holdout_capacity)
         return beta, obs
 
 

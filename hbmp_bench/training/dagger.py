@@ -318,13 +318,19 @@ class _Learner:
                                          and rng.random() < dagger.holdout_fraction)
             if session.budget_reached:
                 break
-        for states, y, hold in pending:
-            if len(self.holdout) >= dagger.holdout_capacity:
-                hold = np.zeros_like(hold)
-            self.train_set.add({k: v[~hold] for k, v in states.items()}, y[~hold])
-            if hold.any():
-                self.holdout.add({k: v[hold] for k, v in states.items()}, y[hold])
+        add_states(pending, self.train_set, self.holdout, dagger.holdout_capacity)
         return beta, obs
+
+
+def add_states(pending, train_set: DemoDataset, holdout: DemoDataset, holdout_capacity: int) -> None:
+    """Add the round's ``pending`` (states, labels, held-out mask) rows: held-out episodes' states to ``holdout``
+    while it has room (then to ``train_set`` too), the others to ``train_set``."""
+    for states, y, hold in pending:
+        if len(holdout) >= holdout_capacity:
+            hold = np.zeros_like(hold)
+        train_set.add({k: v[~hold] for k, v in states.items()}, y[~hold])
+        if hold.any():
+            holdout.add({k: v[hold] for k, v in states.items()}, y[hold])
 
 
 def _train_round(actor, optimizer, data: DemoDataset, dagger: DaggerConfig,
