@@ -45,7 +45,8 @@ def _command_line(args: argparse.Namespace) -> str:
     """The command as a user would type it (for the model card)."""
     parts = ["hbmp-bench", "train", args.kind, "--scenario", args.scenario, "--episodes", str(args.episodes),
              "--workers", str(args.workers), "--seed", str(args.seed), "--out", args.out]
-    for flag, value in (("--fidelity", args.fidelity), ("--observation", args.observation),
+    for flag, value in (("--agents", str(args.agents) if (args.agents or 1) > 1 else None),
+                        ("--fidelity", args.fidelity), ("--observation", args.observation),
                         ("--road-profile", args.road_profile), ("--density", args.density), ("--init", args.init), ("--resume", args.resume),
                         ("--critic-warmup", None if args.critic_warmup is None else str(args.critic_warmup)),
                         ("--backend", None if args.backend == "process" else args.backend),
@@ -255,8 +256,9 @@ def add_commands(subparsers) -> None:
     p.add_argument("--workers", type=int, default=2, help="environment processes (one SUMO each)")
     p.add_argument("--agents", type=int, default=None, metavar="N",
                    help="learners per simulation: N goal-directed vehicles in each worker's scene, each a slot of the "
-                        "batch (workers x N), respawned at a new start when its episode ends; every vehicle must "
-                        "decide every step (event fidelity or the control driver). Default 1: the single ego")
+                        "batch (workers x N), respawned at a new start when its episode ends (in continuous "
+                        "fidelity each decides when its behavior ends). Recorded in the checkpoint: a --resume "
+                        "keeps it. Default 1: the single ego")
     p.add_argument("--backend", choices=("process", "ray"), default="process",
                    help="where the environment workers run: local processes (default) or Ray actors")
     p.add_argument("--address", default=None,

@@ -379,7 +379,7 @@ def model_info(env, actor_cfg: dict, critic_cfg: dict, groups: list[str]) -> dic
         "obs_groups": {"actor": list(groups), "critic": list(groups)},
         "num_actions": env.num_actions,
         "action_space": "discrete" if isinstance(env.action_space, spaces.Discrete) else "box",
-        "env": {"env_id": env.config.env_id, **env.config.kwargs},
+        "env": {"env_id": env.config.env_id, **env.config.kwargs, "agents": env.config.agents},
     }
 
 

@@ -288,3 +288,24 @@ def test_the_ablation_figure_shows_a_run_that_learns_to_stand(tmp_path):
     assert list(series) == ["r_T", "r_T_plus_r_t", "success", "timeout"]
     assert series["timeout"].tolist() == [0.0, 0.0, 0.5, 1.0]
     assert series["success"].tolist() == [0.0, 0.5, 0.5, 0.0]
+
+
+def test_many_learners_are_recorded_and_a_resume_keeps_them(tmp_path):
+    """``--agents 2``: four slots from two workers; the checkpoint and the model card's command name the learners,
+    so a resume that does not repeat the flag trains with them again (not a single ego)."""
+    out = str(tmp_path / "hbmp-agents")
+    options = ["--seed", "0", "--no-progress", "--fidelity", "event", "--init", "none", "--workers", "2"]
+    assert main(["train", "hbmp", "--episodes", "2", "--agents", "2", "--out", out, "--save-every", "1",
+                 *options]) == 0
+    ckpt = torch.load(os.path.join(out, "checkpoint.pt"), weights_only=True)
+    assert ckpt["model"]["env"]["agents"] == 2 and ckpt["progress"]["episodes"] >= 2
+    assert "--agents 2" in ckpt["train"]["command"]
+    more = str(ckpt["progress"]["episodes"] + 1)
+    assert main(["train", "hbmp", "--episodes", more, "--out", out, "--resume", os.path.join(out, "checkpoint.pt"),
+                 "--no-progress"]) == 0
+    resumed = torch.load(os.path.join(out, "checkpoint.pt"), weights_only=True)
+    assert resumed["model"]["env"]["agents"] == 2
+    decisions = read_csv(os.path.join(out, "iterations.csv"))["decisions"].tolist()
+    per_iteration = [b - a for a, b in zip([0] + decisions[:-1], decisions)]
+    assert len(per_iteration) >= 2 and set(per_iteration) == {64 * 2 * 2}  # 64 steps x 2 workers x 2 slots, resumed too
+    assert "--agents 2" in open(os.path.join(out, "MODEL_CARD.md")).read()
