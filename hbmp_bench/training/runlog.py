@@ -228,6 +228,17 @@ def write_model_card(path: str, kind: str, command: str, seed: int, progress: di
         f"- decisions: {progress.get('decisions', 0)}",
         f"- wall time: {progress.get('wall_s', 0.0) / 60:.1f} min",
         f"- machine: {machine_description()}",
+    ]
+    hours = progress.get("wall_s", 0.0) / 3600.0
+    if hours > 0:
+        lines.append(f"- episodes per hour: {progress.get('episodes', 0) / hours:.0f} (wall time, validation included)")
+    agents, workers = int(options.get("env.agents", 1)), int(options.get("workers", 1))
+    if agents > 1:
+        lines.append(f"- learners: {agents} per simulation x {workers} workers = {agents * workers} slots of one shared "
+                     f"policy; the traffic each learner met included the {agents - 1} other learners of its scene, "
+                     "which drive as it does (the same policy, while it learns), besides SUMO's drivers and "
+                     "pedestrians (a single-ego run meets SUMO's only)")
+    lines += [
         "",
         "## Training options",
         "",

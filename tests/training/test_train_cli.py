@@ -308,4 +308,5 @@ def test_many_learners_are_recorded_and_a_resume_keeps_them(tmp_path):
     decisions = read_csv(os.path.join(out, "iterations.csv"))["decisions"].tolist()
     per_iteration = [b - a for a, b in zip([0] + decisions[:-1], decisions)]
     assert len(per_iteration) >= 2 and set(per_iteration) == {64 * 2 * 2}  # 64 steps x 2 workers x 2 slots, resumed too
-    assert "--agents 2" in open(os.path.join(out, "MODEL_CARD.md")).read()
+    card = open(os.path.join(out, "MODEL_CARD.md")).read()
+    assert "--agents 2" in card and "learners: 2 per simulation x 2 workers = 4 slots" in card
