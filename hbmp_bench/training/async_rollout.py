@@ -5,8 +5,9 @@ In continuous fidelity a behavior lasts until the motion planner converges (1-8 
 moments, and each must decide the moment its behavior ends. rsl-rl's runner steps every env at once; here
 instead, per simulation step of the workers (:meth:`~hbmp_bench.training.vec_env.WorkerVecEnv.step_slots`):
 
-1. the slots that must decide now are batched through the policy (``alg.act``: one forward pass; action,
-   value, log-probability and distribution kept as that slot's *open* decision);
+1. the slots that must decide now are batched through the policy (:meth:`ActingPolicy.act`, rsl-rl's
+   ``PPO.act``: one forward pass; action, value, log-probability and distribution kept as that slot's *open*
+   decision);
 2. the workers run until some slot's behavior or episode ends; each reply completes that slot's open
    decision (the reward gathered since it, its ends) and, unless it ended, asks for the next;
 3. once every slot has completed ``steps_per_slot`` transitions, row ``t`` of rsl-rl's storage is the ``t``-th
@@ -17,10 +18,15 @@ A slot that completes its quota early keeps driving: its further transitions sta
 with the policy before the update, whose log-probabilities they carry: PPO's ratio is against the policy that
 acted). A slot's transitions are its own decisions in order, so GAE runs along each learner's own episodes,
 as in single-ego training; a decision's transition spans its whole behavior, as there.
+
+With ``overlap_update`` (``--ppo overlap_update=true``) the workers do not wait for the update: see
+:func:`learn_async`.
 """
 
 from __future__ import annotations
 
+import copy as _copy
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -42,17 +48,45 @@ class Decision:
     time_out: bool = False
 
 
+class ActingPolicy:
+    """The actor and critic a roll-out acts with: ``alg``'s own, or (``copy``) copies that follow them only
+    at :meth:`sync`, so an update may change ``alg``'s networks in another thread while the copies act.
+
+    :meth:`act` is rsl-rl's ``PPO.act`` (the same operations, so the same numbers) without its
+    ``transition`` bookkeeping."""
+
+    def __init__(self, alg, copy: bool = False):
+        self.alg, self.copied = alg, bool(copy)
+        self.actor = _copy.deepcopy(alg.actor) if copy else alg.actor
+        self.critic = _copy.deepcopy(alg.critic) if copy else alg.critic
+
+    def sync(self) -> None:
+        """Copies: take ``alg``'s current weights (and normalisers); own networks: nothing to do."""
+        if self.copied:
+            self.actor.load_state_dict(self.alg.actor.state_dict())
+            self.critic.load_state_dict(self.alg.critic.state_dict())
+
+    def act(self, obs: TensorDict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, tuple[torch.Tensor, ...]]:
+        """Sampled actions (B, num_actions), values (B, 1), log-probabilities (B,) and distribution parameters."""
+        actions = self.actor(obs, stochastic_output=True).detach()
+        values = self.critic(obs).detach()
+        log_prob = self.actor.get_output_log_prob(actions).detach()
+        return actions, values, log_prob, tuple(p.detach() for p in self.actor.output_distribution_params)
+
+
 class AsyncRollout:
-    """Collects ``steps_per_slot`` transitions of every slot of an asynchronous VecEnv into ``alg.storage``.
+    """Collects ``steps_per_slot`` transitions of every slot of an asynchronous VecEnv, then fills ``alg.storage``.
 
     Args:
         env: a :class:`~hbmp_bench.training.vec_env.WorkerVecEnv` with ``asynchronous`` True, just reset.
         alg: rsl-rl's PPO (the package's subclass) whose storage is ``(steps_per_slot, env.num_envs)``.
         steps_per_slot: transitions per slot and rollout (``num_steps_per_env``).
+        policy: what acts (default: ``alg``'s own networks).
     """
 
-    def __init__(self, env, alg, steps_per_slot: int):
+    def __init__(self, env, alg, steps_per_slot: int, policy: ActingPolicy | None = None):
         self.env, self.alg, self.T = env, alg, int(steps_per_slot)
+        self.policy = policy or ActingPolicy(alg)
         n = env.num_envs
         self.completed: list[list[Decision]] = [[] for _ in range(n)]
         self.open: list[Decision | None] = [None] * n
@@ -62,18 +96,15 @@ class AsyncRollout:
         """Actions for the deciding slots, one forward pass; each becomes that slot's open decision."""
         slots = sorted(self.deciding)
         obs = self.env.stack([self.deciding[k] for k in slots])
-        actions = self.alg.act(obs)
-        t = self.alg.transition
+        actions, values, log_prob, params = self.policy.act(obs)
         for i, k in enumerate(slots):
-            self.open[k] = Decision(obs[i], actions[i], t.values[i], t.actions_log_prob[i],
-                                    tuple(p[i] for p in t.distribution_params))
-        t.clear()
+            self.open[k] = Decision(obs[i], actions[i], values[i], log_prob[i], tuple(p[i] for p in params))
         self.deciding = {}
         return {k: actions[i].cpu().numpy() for i, k in enumerate(slots)}
 
     def collect(self) -> TensorDict:
-        """Run until every slot has ``T`` completed transitions, fill the storage; returns (num_envs,) the
-        observation after each slot's ``T``-th transition (for the returns' bootstrap)."""
+        """Run until every slot has ``T`` completed transitions; returns (num_envs,) the observation after each
+        slot's ``T``-th transition (for the returns' bootstrap). :meth:`fill` then moves them to the storage."""
         while min(len(c) for c in self.completed) < self.T:
             actions = self._decide() if self.deciding else {}
             for k, reply in self.env.step_slots(actions):
@@ -86,11 +117,21 @@ class AsyncRollout:
                     self.open[k] = None
                 if reply.decides:
                     self.deciding[k] = reply
+        return self._next_observations()
+
+    def fill(self, last: TensorDict) -> None:
+        """The storage's rows from the first ``T`` completed transitions of every slot (row ``t``: each slot's
+        ``t``-th), then the returns and advantages, bootstrapped from ``last`` with the critic that acted (the
+        one whose values the rows hold)."""
         self._fill()
-        last = self._next_observations()
         for c in self.completed:
             del c[:self.T]
-        return last
+        trained = self.alg.critic
+        self.alg.critic = self.policy.critic  # rsl-rl's compute_returns evaluates alg.critic on ``last``
+        try:
+            self.alg.compute_returns(last)
+        finally:
+            self.alg.critic = trained
 
     def _fill(self) -> None:
         alg, n = self.alg, self.env.num_envs
@@ -124,14 +165,38 @@ class AsyncRollout:
         return torch.stack(out)
 
 
-def learn_async(runner, env, steps_per_slot: int, on_iteration) -> None:
+def learn_async(runner, env, steps_per_slot: int, on_iteration, overlap_update: bool = False) -> None:
     """rsl-rl's learning loop (``OnPolicyRunner.learn``) with :class:`AsyncRollout` as its rollout: rollout,
-    returns, update, then ``on_iteration(losses)`` (which ends the loop by raising), until it does."""
+    returns, update, then ``on_iteration(losses)`` (which ends the loop by raising), until it does.
+
+    ``overlap_update``: the update runs in a thread while the workers collect the next roll-out, acted by
+    copies of the networks the update starts from (:class:`ActingPolicy`); so update ``k`` (from the policy
+    θ_k) learns from roll-out ``k``, collected with θ_{k-1} (PPO's ratio and clip are against the policy that
+    acted, whose log-probabilities the roll-out holds). The schedule does not depend on timing and the update
+    draws no random number in its thread (its mini-batch order is drawn before it starts), so a seed gives the
+    same run. Without it the workers wait for every update (about a third of a continuous-fidelity iteration
+    on 2 cores), with it they do not."""
     alg = runner.alg
     alg.train_mode()
-    rollout = AsyncRollout(env, alg, steps_per_slot)
+    policy = ActingPolicy(alg, copy=overlap_update)
+    rollout = AsyncRollout(env, alg, steps_per_slot, policy)
+    with torch.inference_mode():
+        last = rollout.collect()
     while True:
         with torch.inference_mode():
-            last = rollout.collect()
-            alg.compute_returns(last)
-        on_iteration(alg.update())
+            rollout.fill(last)
+        if not overlap_update:
+            on_iteration(alg.update())
+            with torch.inference_mode():
+                last = rollout.collect()
+            continue
+        policy.sync()  # the next roll-out acts with the policy this update starts from
+        indices = alg.shuffle()  # in this thread: the acting samples and the update's order stay in one sequence
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="ppo-update") as pool:
+            update = pool.submit(alg.update, indices)
+            try:
+                with torch.inference_mode():
+                    last = rollout.collect()
+            finally:
+                losses = update.result()
+        on_iteration(losses)

@@ -86,7 +86,7 @@ from hbmp_bench.training.run import RunConfig
 from hbmp_bench.training.runlog import EPISODE_COLUMNS, ITERATION_COLUMNS
 from hbmp_bench.training.session import TrainingSession
 from hbmp_bench.training.validation import Validator, validation_results
-from hbmp_bench.training.worker import WorkerEnvConfig
+from hbmp_bench.training.worker import WorkerEnvConfig, asynchronous_scene
 
 MASK_GROUP = "action_mask"
 ANCHOR_KL = ("forward", "reverse")
@@ -152,19 +152,48 @@ class TwoRatePPO(PPO):
     def actor_frozen(self) -> bool:
         return self._frozen
 
-    def update(self) -> dict[str, float]:
+    def shuffle(self) -> torch.Tensor:
+        """The order of the storage's transitions in the next update's mini-batches (a permutation, drawn from
+        torch's global generator as rsl-rl's ``mini_batch_generator`` draws it)."""
+        n = self.storage.num_envs * self.storage.num_transitions_per_env
+        size = n // self.num_mini_batches
+        return torch.randperm(self.num_mini_batches * size, requires_grad=False, device=self.device)
+
+    def _mini_batches(self, indices: torch.Tensor):
+        """rsl-rl's feed-forward ``mini_batch_generator`` over ``indices`` (the same permutation every epoch)."""
+        from rsl_rl.storage.rollout_storage import RolloutStorage
+
+        st = self.storage
+        observations, actions = st.observations.flatten(0, 1), st.actions.flatten(0, 1)
+        values, returns = st.values.flatten(0, 1), st.returns.flatten(0, 1)
+        log_probs, advantages = st.actions_log_prob.flatten(0, 1), st.advantages.flatten(0, 1)
+        params = tuple(p.flatten(0, 1) for p in st.distribution_params)
+        size = len(indices) // self.num_mini_batches
+        for _ in range(self.num_learning_epochs):
+            for i in range(self.num_mini_batches):
+                idx = indices[i * size:(i + 1) * size]
+                yield RolloutStorage.Batch(observations=observations[idx], actions=actions[idx], values=values[idx],
+                                           advantages=advantages[idx], returns=returns[idx],
+                                           old_actions_log_prob=log_probs[idx],
+                                           old_distribution_params=tuple(p[idx] for p in params))
+
+    def update(self, indices: torch.Tensor | None = None) -> dict[str, float]:
         """rsl-rl's PPO update for what this package uses (feed-forward models, one process, no RND, no
         symmetry), with the actor-only adaptive rate and the anchor term. Returns the mean losses, the
-        mean KL to the anchor (``kl_init``, 0 without one) and the actor's rate at the end (``actor_lr``)."""
+        mean KL to the anchor (``kl_init``, 0 without one) and the actor's rate at the end (``actor_lr``).
+
+        ``indices``: the mini-batches' order (:meth:`shuffle`; None: drawn here). The update draws no other
+        random number (the distributions are evaluated, not sampled), so an update run in another thread
+        while the next roll-out samples actions (``PPOConfig.overlap_update``) leaves the run deterministic."""
         if self.actor.is_recurrent or self.critic.is_recurrent or self.rnd or self.symmetry or self.is_multi_gpu:
             raise NotImplementedError("TwoRatePPO.update covers feed-forward models on one process only")
         sums = {"value": 0.0, "surrogate": 0.0, "entropy": 0.0, "kl_init": 0.0}
         updates = 0
-        for batch in self.storage.mini_batch_generator(self.num_mini_batches, self.num_learning_epochs):
+        for batch in self._mini_batches(self.shuffle() if indices is None else indices):
             if self.normalize_advantage_per_mini_batch:
                 with torch.no_grad():
                     batch.advantages = (batch.advantages - batch.advantages.mean()) / (batch.advantages.std() + 1e-8)
-            self.actor(batch.observations, masks=batch.masks, stochastic_output=True)
+            self.actor.distribution.update(self.actor.distribution_input(batch.observations))
             log_prob = self.actor.get_output_log_prob(batch.actions)
             params = self.actor.output_distribution_params
             entropy = self.actor.output_entropy
@@ -190,7 +219,7 @@ class TwoRatePPO(PPO):
             loss = surrogate + self.value_loss_coef * value_loss - self.entropy_coef * entropy.mean()
             if self.anchor is not None:
                 with torch.no_grad():
-                    self.anchor(batch.observations, masks=batch.masks, stochastic_output=True)
+                    self.anchor.distribution.update(self.anchor.distribution_input(batch.observations))
                     anchor_params = tuple(p.detach() for p in self.anchor.output_distribution_params)
                 kl_init = (self.actor.get_kl_divergence(anchor_params, params) if self.anchor_kl == "forward"
                            else self.actor.get_kl_divergence(params, anchor_params)).mean()
@@ -237,6 +266,11 @@ class PPOConfig:
         anchor_kl: direction of that KL: ``forward`` KL(π_IL ‖ π) or ``reverse`` KL(π ‖ π_IL).
         temperature: the behavior policy is softmax(logits / temperature) (1: the paper's); see the
             module notes.
+        overlap_update: learners of a scene in continuous fidelity (``--agents N``) only: the workers collect
+            the next roll-out while the update runs, with the policy the update starts from, so each update
+            learns from a roll-out one update older than itself (see
+            :func:`~hbmp_bench.training.async_rollout.learn_async`). False (default): rsl-rl's order, each
+            roll-out with the policy it then updates.
     """
 
     actor_learning_rate: float = 1e-4
@@ -258,6 +292,7 @@ class PPOConfig:
     anchor_coef: float = 0.0
     anchor_kl: str = "forward"
     temperature: float = 1.0
+    overlap_update: bool = False
 
     def __post_init__(self):
         if self.anchor_kl not in ANCHOR_KL:
@@ -421,6 +456,9 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
     resume = session.resume
     ppo = _recorded_ppo(resume, ppo) if resume is not None else ppo or PPOConfig()
     env_config = dataclasses.replace(env_config, reward_scale=ppo.reward_scale, expert_labels=False)
+    if ppo.overlap_update and not asynchronous_scene(env_config):
+        raise ConfigError("overlap_update overlaps the update with the roll-out of learners that decide at "
+                          "different times: --agents N > 1 in continuous fidelity")
     init_kinds = INIT_KINDS["flat" if run.kind == "flat" else "behavior"]
     init_ckpt = load_checkpoint(init, kinds=init_kinds) if init and resume is None else None
     from rsl_rl.runners import OnPolicyRunner
@@ -488,7 +526,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
             if env.asynchronous:  # learners of a scene in continuous fidelity: each decides when its behavior ends
                 from hbmp_bench.training.async_rollout import learn_async
 
-                learn_async(runner, env, cfg["num_steps_per_env"], after_iteration)
+                learn_async(runner, env, cfg["num_steps_per_env"], after_iteration, overlap_update=ppo.overlap_update)
             else:
                 runner.learn(num_learning_iterations=10**9)
         except BudgetReached:

@@ -2,12 +2,15 @@
 decisions in order, with the rewards gathered over each behavior, fill rsl-rl's storage row by row; a slot
 that completes its quota early carries its further transitions into the next rollout."""
 
+import time
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import torch
 from tensordict import TensorDict
 
-from hbmp_bench.training.async_rollout import AsyncRollout
+from hbmp_bench.training.async_rollout import AsyncRollout, learn_async
 from hbmp_bench.training.worker import StepReply
 
 
@@ -44,35 +47,72 @@ class FakeScene:
         return out
 
 
+class FakeActor(torch.nn.Module):
+    """An actor whose ``version`` (a buffer an update raises by one) shows in what it returns: action = slot
+    + 0.5, log-probability = -version, distribution parameter = the slot."""
+
+    def __init__(self):
+        super().__init__()
+        self.register_buffer("version", torch.zeros(()))
+
+    def forward(self, obs, stochastic_output=False):
+        road = obs["road"]
+        self.output_distribution_params = (road[:, :1],)
+        self._n = road.shape[0]
+        return road[:, :1] + 0.5
+
+    def get_output_log_prob(self, actions):
+        return -self.version * torch.ones(self._n)
+
+
+class FakeCritic(FakeActor):
+    def forward(self, obs):
+        return obs["road"][:, 1:2] * 100.0
+
+
 class FakePPO:
-    """The parts of rsl-rl's PPO the rollout uses; the storage is a list of rows."""
+    """The parts of rsl-rl's PPO the rollout and the loop use; the storage is a list of rows. ``update`` raises
+    the actor's and the critic's version by one and keeps what it learnt from."""
 
     class Transition:
         def clear(self):
             self.__dict__.clear()
 
-    def __init__(self):
+    def __init__(self, update_s=0.0):
         self.transition = self.Transition()
-        self.rows = []
+        self.actor, self.critic = FakeActor(), FakeCritic()
+        self.rows, self.updates, self.returns_critics = [], [], []
+        self.update_s = update_s
 
-    def act(self, obs):
-        n = obs.batch_size[0]
-        self.transition.values = obs["road"][:, 1:2] * 100.0
-        self.transition.actions_log_prob = obs["road"][:, 1] * -1.0
-        self.transition.distribution_params = (obs["road"][:, :1],)
-        self.acted = obs["road"].clone()
-        return obs["road"][:, :1] + 0.5 * torch.ones(n, 1)
+    def train_mode(self):
+        pass
 
     def process_env_step(self, obs, rewards, dones, extras):
         t = self.transition
         self.rows.append({"obs": t.observations["road"].clone(), "rewards": rewards.clone(), "dones": dones.clone(),
-                          "values": t.values.clone()})
+                          "values": t.values.clone(), "acted_by": float(-t.actions_log_prob[1])})  # slot 1: the slowest, never carried over
+
+    def compute_returns(self, last):
+        self.returns_critics.append(float(self.critic.version))
+
+    def shuffle(self):
+        return torch.randperm(4)
+
+    def update(self, indices=None):
+        time.sleep(self.update_s)
+        self.updates.append({"from": float(self.actor.version), "rows": [r["acted_by"] for r in self.rows]})
+        self.rows = []
+        with torch.no_grad():
+            self.actor.version += 1
+            self.critic.version += 1
+        return {"value": 0.0}
 
 
 def test_each_slot_fills_its_column_with_its_own_decisions_in_order():
     env, alg = FakeScene(), FakePPO()
     rollout = AsyncRollout(env, alg, steps_per_slot=2)
     last = rollout.collect()
+    rollout.fill(last)
     assert len(alg.rows) == 2
     for t, row in enumerate(alg.rows):
         # column k holds slot k's t-th decision (made on its observation after t decisions)
@@ -83,9 +123,56 @@ def test_each_slot_fills_its_column_with_its_own_decisions_in_order():
     assert last["road"].tolist() == [[0.0, 2.0], [1.0, 2.0]]
     assert [len(c) for c in rollout.completed] == [4, 0]
     alg.rows.clear()
-    rollout.collect()
+    rollout.fill(rollout.collect())
     assert alg.rows[0]["obs"].tolist() == [[0.0, 2.0], [1.0, 2.0]]
     assert alg.rows[0]["dones"].tolist() == [1, 0]  # slot 0's third decision ended its episode
+
+
+class Stop(Exception):
+    pass
+
+
+def _learn(overlap, iterations=4, update_s=0.0):
+    env, alg = FakeScene(), FakePPO(update_s)
+
+    def on_iteration(losses):
+        if len(alg.updates) == iterations:
+            raise Stop
+
+    with pytest.raises(Stop):
+        learn_async(SimpleNamespace(alg=alg), env, 2, on_iteration, overlap_update=overlap)
+    return alg
+
+
+def test_without_overlap_each_rollout_is_acted_by_the_policy_it_updates():
+    alg = _learn(overlap=False)
+    assert [u["from"] for u in alg.updates] == [0, 1, 2, 3]
+    assert [u["rows"] for u in alg.updates] == [[0, 0], [1, 1], [2, 2], [3, 3]]
+    assert alg.returns_critics == [0, 1, 2, 3]  # bootstrapped by the critic that acted
+
+
+def test_with_overlap_update_k_learns_from_the_rollout_acted_by_the_policy_before_it():
+    """The workers collect roll-out k+1 while update k runs (it sleeps here, so the roll-out really runs
+    beside it): that roll-out is acted by the copies of θ_k, never by the networks being updated, and fills
+    the storage only after the update; the schedule is the same however long the update takes."""
+    alg = _learn(overlap=True, update_s=0.05)
+    assert [u["from"] for u in alg.updates] == [0, 1, 2, 3]
+    assert [u["rows"] for u in alg.updates] == [[0, 0], [0, 0], [1, 1], [2, 2]]  # two rows per update, one policy
+    assert alg.returns_critics == [0, 0, 1, 2]  # the critic that acted bootstraps, not the updated one
+    assert _learn(overlap=True, update_s=0.0).updates == alg.updates
+
+
+def test_overlap_update_is_refused_where_every_learner_decides_every_step(tmp_path):
+    from hbmp_bench.errors import ConfigError
+    from hbmp_bench.training.ppo import PPOConfig, train_ppo
+    from hbmp_bench.training.run import RunConfig
+    from hbmp_bench.training.worker import WorkerEnvConfig
+
+    run = RunConfig(kind="hbmp", episodes=1, out=str(tmp_path / "run"), workers=1)
+    for config in (WorkerEnvConfig(env_kwargs={"fidelity": "continuous"}),  # a single ego
+                   WorkerEnvConfig(env_kwargs={"fidelity": "event"}, agents=2)):
+        with pytest.raises(ConfigError, match="overlap_update"):
+            train_ppo(run, config, PPOConfig(overlap_update=True))
 
 
 @pytest.mark.slow

@@ -310,3 +310,22 @@ def test_many_learners_are_recorded_and_a_resume_keeps_them(tmp_path):
     assert len(per_iteration) >= 2 and set(per_iteration) == {64 * 2 * 2}  # 64 steps x 2 workers x 2 slots, resumed too
     card = open(os.path.join(out, "MODEL_CARD.md")).read()
     assert "--agents 2" in card and "learners: 2 per simulation x 2 workers = 4 slots" in card
+
+
+def test_overlapped_updates_of_continuous_learners_train_and_a_seed_gives_the_same_run(tmp_path):
+    """``--agents 2`` in continuous fidelity with ``--ppo overlap_update=true``: the update runs beside the next
+    roll-out; every iteration fills 2 slots x 8 decisions, and the same seed gives the same losses (the
+    schedule does not depend on timing, the update thread draws no random number)."""
+    runs = []
+    for name in ("a", "b"):
+        out = str(tmp_path / name)
+        assert main(["train", "hbmp", "--episodes", "4", "--agents", "2", "--workers", "1", "--out", out,
+                     "--seed", "3", "--fidelity", "continuous", "--init", "none", "--no-progress",
+                     "--ppo", "overlap_update=true", "--ppo", "num_steps_per_env=8", "--ppo", "mini_batch_size=8"]) == 0
+        runs.append(read_csv(os.path.join(out, "iterations.csv")))
+    first, second = runs
+    decisions = first["decisions"].tolist()
+    assert len(decisions) >= 3 and {b - a for a, b in zip([0] + decisions[:-1], decisions)} == {16}
+    for column in ("value", "surrogate", "entropy"):
+        assert first[column].tolist() == second[column].tolist(), column
+    assert "overlap_update=true" in open(os.path.join(tmp_path, "a", "MODEL_CARD.md")).read()
