@@ -182,21 +182,21 @@ def learn_async(runner, env, steps_per_slot: int, on_iteration, overlap_update: 
     rollout = AsyncRollout(env, alg, steps_per_slot, policy)
     with torch.inference_mode():
         last = rollout.collect()
-    while True:
-        with torch.inference_mode():
-            rollout.fill(last)
-        if not overlap_update:
-            on_iteration(alg.update())
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="ppo-update") as pool:
+        while True:
             with torch.inference_mode():
-                last = rollout.collect()
-            continue
-        policy.sync()  # the next roll-out acts with the policy this update starts from
-        indices = alg.shuffle()  # in this thread: the acting samples and the update's order stay in one sequence
-        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="ppo-update") as pool:
-            update = pool.submit(alg.update, indices)
+                rollout.fill(last)
+            if not overlap_update:
+                on_iteration(alg.update())
+                with torch.inference_mode():
+                    last = rollout.collect()
+                continue
+            policy.sync()  # the next roll-out acts with the policy this update starts from
+            # the order drawn here: the acting samples and the update's order stay in one sequence
+            update = pool.submit(alg.update, alg.shuffle())
             try:
                 with torch.inference_mode():
                     last = rollout.collect()
             finally:
                 losses = update.result()
-        on_iteration(losses)
+            on_iteration(losses)
