@@ -12,8 +12,12 @@ import dataclasses
 import time
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from hbmp_bench.metrics.records import EpisodeRecord
+
+if TYPE_CHECKING:
+    from hbmp_bench.evaluation.tasks import RunnerLimits
 
 
 @dataclass(frozen=True)
@@ -56,16 +60,17 @@ def run_job(job: Job) -> tuple[list[EpisodeRecord], float, int]:
     return records, time.perf_counter() - start, decisions
 
 
-def run_jobs(jobs: Iterable[Job], workers: int = 1, progress: bool = True) -> list[EpisodeRecord]:
+def run_jobs(jobs: Iterable[Job], workers: int = 1, progress: bool = True,
+             limits: RunnerLimits | None = None) -> list[EpisodeRecord]:
     """Run jobs' episodes in ``workers`` isolated slots (agent and simulation in their own processes,
-    each agent in the env it asks for); records come back ordered like the jobs. A failing agent
-    gives ``agent_error`` records."""
+    each agent in the env it asks for, isolated as ``limits`` say: default ``RunnerLimits()``); records
+    come back ordered like the jobs. A failing agent gives ``agent_error`` records."""
     from hbmp_bench.evaluation.evaluate import iter_outcomes
     from hbmp_bench.evaluation.tasks import EpisodeTask, default_fidelity
 
     jobs = list(jobs)
     fidelity = default_fidelity()
     tasks = [EpisodeTask(j.suite, j.town, j.task, i, j.agent, j.fidelity or fidelity) for j in jobs for i in j.episodes]
-    records = [r for o in iter_outcomes(tasks, workers=workers, progress=progress) for r in o.records]
+    records = [r for o in iter_outcomes(tasks, workers=workers, limits=limits, progress=progress) for r in o.records]
     order = {t.key: k for k, t in enumerate(tasks)}
     return sorted(records, key=lambda r: order.get(r.key, len(order)))

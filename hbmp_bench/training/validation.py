@@ -9,7 +9,8 @@ improved the greedy policy, nor which checkpoint to ship.
 Every ``validate_every`` episodes the run evaluates its current actor on the ``hbmp-val`` suite
 (Town03 Navigation and Navigation dynamic, the first 20 of 50 each unless told, the paper's protocol,
 episodes drawn from their own seed: not the test suites' episodes) with the package's evaluator (isolated
-processes, as ``evaluate`` runs agents), appends a row to ``validation.csv`` and writes the actor to ``best.pt`` when its success
+processes, as ``evaluate`` runs agents; the actor is the run's own, written by the trainer a moment before, so it
+is trusted: no namespace sandbox, which a host without bubblewrap could not give), appends a row to ``validation.csv`` and writes the actor to ``best.pt`` when its success
 is the best so far (ties: the later one). A fresh run validates its initial actor first (episode 0), so
 the ``il`` baseline is the first row. The training workers wait meanwhile; 40 continuous episodes take
 41-57 s with 2 slots on a quiet 2-core machine (4-7 min where other work ran beside).
@@ -41,13 +42,14 @@ def validate(policy: str, workers: int, fidelity: str | None = None, episodes: i
              progress: bool = False) -> dict[str, Any]:
     """Evaluate the checkpoint ``policy`` greedily on :data:`VALIDATION_SUITE`: its first ``episodes``
     episodes per task (None: :data:`DEFAULT_EPISODES_PER_TASK`), in ``workers`` evaluation slots, in
-    ``fidelity`` (None: the default).
+    ``fidelity`` (None: the default). ``policy`` is trusted (``RunnerLimits(trust_agent=True)``): it is
+    the training run's own actor, not a submission.
 
     Returns the columns of :data:`VALIDATION_COLUMNS` but ``episode``.
     """
     import time
 
-    from hbmp_bench.evaluation import Job, run_jobs
+    from hbmp_bench.evaluation import Job, RunnerLimits, run_jobs
     from hbmp_bench.scenarios import get_suite
 
     suite = get_suite(VALIDATION_SUITE)
@@ -55,7 +57,7 @@ def validate(policy: str, workers: int, fidelity: str | None = None, episodes: i
     count = min(DEFAULT_EPISODES_PER_TASK if episodes is None else episodes, suite.episodes_per_task)
     jobs = [Job(suite.name, town, task, policy, tuple(range(count)), fidelity)
             for town in suite.towns for task in suite.tasks]
-    records = run_jobs(jobs, workers=workers, progress=progress)
+    records = run_jobs(jobs, workers=workers, progress=progress, limits=RunnerLimits(trust_agent=True))
 
     def rate(rows) -> float:
         return round(float(np.mean([r.success for r in rows])), 4) if rows else float("nan")

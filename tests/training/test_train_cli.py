@@ -230,6 +230,22 @@ def test_validation_rows_and_best_policy(il_run, tmp_path):
     assert again["episode"].tolist()[:2] == rows["episode"].tolist(), "rows up to the checkpoint are kept"
 
 
+def test_validation_needs_no_sandbox(il_run, monkeypatch):
+    """The run validates its own actor, trusted: on a host without bubblewrap a run with --validate-every
+    trains (it stopped at episode 0 with the sandbox's error), while a submitted checkpoint is still refused."""
+    from hbmp_bench.evaluation import Job, run_jobs
+    from hbmp_bench.evaluation import pool
+    from hbmp_bench.evaluation.namespaces import SandboxUnavailable
+    from hbmp_bench.training.validation import validate
+
+    monkeypatch.setattr(pool, "sandbox_problem", lambda: "bwrap (bubblewrap) is not installed")
+    policy = os.path.join(il_run, "policy.pt")
+    with pytest.raises(SandboxUnavailable, match="bubblewrap"):
+        run_jobs([Job("hbmp-val", "Town03", "Navigation", policy, (0,), "event")], workers=1, progress=False)
+    row = validate(policy, workers=1, fidelity="event", episodes=1)
+    assert row["episodes"] == 2 and 0 <= row["success"] <= 1 and row["route_completion"] > 0
+
+
 def test_validate_every_is_for_ppo(tmp_path, capsys):
     assert main(["train", "il", "--validate-every", "5", "--out", str(tmp_path / "il"), *COMMON]) == 2
     assert "--validate-every" in capsys.readouterr().err and not os.path.exists(tmp_path / "il")
