@@ -1,0 +1,92 @@
+"""PPO's training throughput: learners per simulation and the overlapped update, measured in one run.
+
+    python benchmarks/training_throughput.py [--episodes 120] [--setups 1x2 8x2 8x2+overlap] [--json FILE]
+
+Each setup (``LEARNERSxWORKERS``, ``+overlap`` for ``--ppo overlap_update=true``) trains the shipped ``hbmp``
+recipe (PPO from ``il`` in continuous fidelity on ``Training-v0``, seed 0, no critic warm-up, no validation)
+for ``--episodes`` episodes with ``hbmp-bench train``, one setup after the other in fresh folders, so they
+meet the same machine; the ratios to the first setup are the figures to read. From each run's
+``iterations.csv``: seconds per iteration after the first (the start, the first roll-out and, overlapped, the
+first update are left out) and decisions per second over those iterations; the whole command's wall time
+gives episodes per minute with the start included.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import re
+import subprocess
+import sys
+import tempfile
+import time
+
+RECIPE = ["--scenario", "hbmp_bench/Training-v0", "--seed", "0", "--fidelity", "continuous", "--road-profile",
+          "metric", "--density", "regular", "--init", "il", "--ppo", "anchor_kl=reverse", "--ppo", "anchor_coef=0.1",
+          "--critic-warmup", "0", "--validate-every", "0", "--no-progress"]
+SETUP = re.compile(r"^(\d+)x(\d+)(\+overlap)?$")
+
+
+def parse_setup(text: str) -> tuple[int, int, bool]:
+    """``"8x2+overlap"`` -> (learners per simulation, workers, overlapped update)."""
+    match = SETUP.match(text)
+    if not match:
+        raise argparse.ArgumentTypeError(f"a setup is LEARNERSxWORKERS or LEARNERSxWORKERS+overlap, got {text!r}")
+    return int(match.group(1)), int(match.group(2)), bool(match.group(3))
+
+
+def measure(setup: str, episodes: int, folder: str) -> dict:
+    """Train one setup in ``folder``; its throughput figures."""
+    from hbmp_bench.training.runlog import read_csv
+
+    agents, workers, overlap = parse_setup(setup)
+    out = os.path.join(folder, setup.replace("+", "-"))
+    command = [sys.executable, "-m", "hbmp_bench.cli", "train", "hbmp", *RECIPE, "--episodes", str(episodes),
+               "--workers", str(workers), "--agents", str(agents), "--out", out]
+    if overlap:
+        command += ["--ppo", "overlap_update=true"]
+    start = time.perf_counter()
+    subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+    wall = time.perf_counter() - start
+    rows = read_csv(os.path.join(out, "iterations.csv"))
+    wall_s, decisions = rows["wall_s"], rows["decisions"]
+    if len(wall_s) < 3:
+        raise SystemExit(f"{setup}: {len(wall_s)} iterations in {episodes} episodes; give more --episodes")
+    per_iteration = float((wall_s[-1] - wall_s[0]) / (len(wall_s) - 1))
+    return {"setup": setup, "agents": agents, "workers": workers, "overlap_update": overlap,
+            "iterations": int(len(wall_s)), "s_per_iteration": round(per_iteration, 2),
+            "decisions_per_s": round(float(decisions[-1] - decisions[0]) / float(wall_s[-1] - wall_s[0]), 1),
+            "episodes_per_min": round(60.0 * episodes / wall, 1), "wall_s": round(wall, 1)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=120, help="episodes per setup (default 120)")
+    parser.add_argument("--setups", nargs="+", default=["1x2", "8x2", "8x2+overlap"], type=str,
+                        help="LEARNERSxWORKERS[+overlap] each (default: 1x2 8x2 8x2+overlap); ratios to the first")
+    parser.add_argument("--json", default=None, metavar="FILE", help="also write the results to FILE")
+    args = parser.parse_args(argv)
+    for setup in args.setups:
+        parse_setup(setup)  # every setup checked before the first one trains
+    with tempfile.TemporaryDirectory(prefix="hbmp-train-bench-") as folder:
+        rows = [measure(setup, args.episodes, folder) for setup in args.setups]
+    base = rows[0]
+    for row in rows:
+        row["decisions_per_s_ratio"] = round(row["decisions_per_s"] / base["decisions_per_s"], 2)
+        row["episodes_per_min_ratio"] = round(row["episodes_per_min"] / base["episodes_per_min"], 2)
+    print(f"{'setup':<14}{'s/iteration':>12}{'decisions/s':>13}{'x':>6}{'episodes/min':>14}{'x':>6}")
+    for r in rows:
+        print(f"{r['setup']:<14}{r['s_per_iteration']:>12}{r['decisions_per_s']:>13}{r['decisions_per_s_ratio']:>6}"
+              f"{r['episodes_per_min']:>14}{r['episodes_per_min_ratio']:>6}")
+    if args.json:
+        result = {"episodes": args.episodes, "machine": f"{platform.system()} {platform.machine()}, "
+                  f"{os.cpu_count()} cores, Python {platform.python_version()}", "setups": rows}
+        with open(args.json, "w") as f:
+            json.dump(result, f, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
