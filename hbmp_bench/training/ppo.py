@@ -258,7 +258,8 @@ class PPOConfig:
         lam, num_learning_epochs, entropy_coef, value_loss_coef, max_grad_norm: rsl-rl's defaults.
         reward_scale: factor on the training reward (see the module notes).
         mask_actions: mask infeasible behaviors in the policy (see :mod:`hbmp_bench.policies.networks`).
-        init_std: initial standard deviation of the flat baseline's Gaussian controls.
+        init_std: initial standard deviation of the flat baseline's Gaussian controls (from an ``--init`` actor
+            too: imitation fits only the mean, see :func:`with_initial_std`).
         critic_warmup_episodes: episodes at the start of a run during which only the critic
             learns (the actor's learning rate is 0); see the module notes.
         desired_kl: None (fixed LR_a) or the per-mini-batch KL the adaptive actor rate aims at.
@@ -471,7 +472,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
             runner = OnPolicyRunner(env, cfg, log_dir=None, device="cpu")
         info = model_info(env, actor_cfg, critic_cfg, groups)
         alg = runner.alg
-        _load_weights(alg, resume, init_ckpt, info)
+        _load_weights(alg, resume, None if init_ckpt is None else with_initial_std(init_ckpt, ppo.init_std), info)
         if ppo.anchor_coef > 0 and alg.anchor is None:
             raise ConfigError("anchor_coef > 0 needs an --init actor to anchor to")
         init_option = (init_label or init) if resume is None else resume["train"].get("init")
@@ -563,6 +564,20 @@ def _model_cfgs(env, ppo: PPOConfig, init: dict[str, Any] | None = None) -> tupl
         sizes = init["model"]["actor"]
         actor_cfg = {**actor_cfg, **{k: sizes[k] for k in NETWORK if k in sizes}}
     return actor_cfg, critic_cfg, groups
+
+
+def with_initial_std(init: dict[str, Any], std: float) -> dict[str, Any]:
+    """``init`` with its Gaussian actor's standard deviation set to ``std`` (``PPOConfig.init_std``): imitation
+    (``flat-il``) fits only the mean and keeps the std it was built with, so PPO from it explores with the run's
+    own ``init_std`` (also the anchor's); a categorical actor (behaviors) is returned as it is."""
+    state = init["actor_state_dict"]
+    if "distribution.log_std_param" in state:
+        value = torch.log(std * torch.ones_like(state["distribution.log_std_param"]))  # as rsl-rl builds it
+        return {**init, "actor_state_dict": {**state, "distribution.log_std_param": value}}
+    if "distribution.std_param" in state:
+        return {**init, "actor_state_dict": {**state, "distribution.std_param": torch.full_like(
+            state["distribution.std_param"], float(std))}}
+    return init
 
 
 def _load_weights(alg, resume: dict[str, Any] | None, init: dict[str, Any] | None, info: dict[str, Any]) -> None:

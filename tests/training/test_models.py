@@ -176,3 +176,26 @@ def test_csv_log_drops_rows_logged_after_the_resumed_checkpoint(tmp_path):
         log.write({"episode": 4, "r_T": 40.0})
     rows = read_csv(path)
     assert rows["episode"].tolist() == [1, 2, 3, 4] and rows["r_T"].tolist() == [1.0, 2.0, 3.0, 40.0]
+
+
+def test_ppo_from_an_imitated_control_actor_explores_with_the_runs_init_std():
+    """flat-il fits only the mean of its Gaussian (its std is the one it was built with): PPO from it (flat-ilrl)
+    starts at ``PPOConfig.init_std``, every other weight as imitated; a behavior actor is left as it is."""
+    import math
+
+    from hbmp_bench.agents.learned import shipped_checkpoint
+    from hbmp_bench.policies.checkpoints import load_checkpoint
+    from hbmp_bench.training.ppo import with_initial_std
+
+    flat_il = load_checkpoint(shipped_checkpoint("flat-il"))
+    narrow = with_initial_std(flat_il, 0.1)
+    std = narrow["actor_state_dict"]["distribution.log_std_param"].exp()
+    assert torch.allclose(std, torch.full_like(std, 0.1))
+    assert flat_il["actor_state_dict"]["distribution.log_std_param"].exp().tolist() == pytest.approx([0.5, 0.5])
+    kept = [k for k in flat_il["actor_state_dict"] if k != "distribution.log_std_param"]
+    assert kept and all(narrow["actor_state_dict"][k] is flat_il["actor_state_dict"][k] for k in kept)
+    model = build_model(narrow["model"]["actor"], {"occupancy": (1, 64, 36), "road": (12,)}, GROUPS, "actor", 2)
+    model.load_state_dict(narrow["actor_state_dict"])
+    assert math.isclose(float(model.distribution.log_std_param.detach()[0]), math.log(0.1), rel_tol=1e-6)
+    il = load_checkpoint(shipped_checkpoint("il"))
+    assert with_initial_std(il, 0.1) is il
