@@ -258,8 +258,8 @@ class PPOConfig:
         lam, num_learning_epochs, entropy_coef, value_loss_coef, max_grad_norm: rsl-rl's defaults.
         reward_scale: factor on the training reward (see the module notes).
         mask_actions: mask infeasible behaviors in the policy (see :mod:`hbmp_bench.policies.networks`).
-        init_std: initial standard deviation of the flat baseline's Gaussian controls (from an ``--init`` actor
-            too: imitation fits only the mean, see :func:`with_initial_std`).
+        init_std: initial standard deviation of the flat baseline's Gaussian controls (an ``--init`` ``flat-il``
+            actor's too: imitation fits only the mean, see :func:`with_initial_std`).
         critic_warmup_episodes: episodes at the start of a run during which only the critic
             learns (the actor's learning rate is 0); see the module notes.
         desired_kl: None (fixed LR_a) or the per-mini-batch KL the adaptive actor rate aims at.
@@ -567,17 +567,15 @@ def _model_cfgs(env, ppo: PPOConfig, init: dict[str, Any] | None = None) -> tupl
 
 
 def with_initial_std(init: dict[str, Any], std: float) -> dict[str, Any]:
-    """``init`` with its Gaussian actor's standard deviation set to ``std`` (``PPOConfig.init_std``): imitation
-    (``flat-il``) fits only the mean and keeps the std it was built with, so PPO from it explores with the run's
-    own ``init_std`` (also the anchor's); a categorical actor (behaviors) is returned as it is."""
+    """``init`` with its Gaussian actor's standard deviation set to ``std`` (``PPOConfig.init_std``) when imitation
+    made it (kind ``flat-il``): DAgger fits only the mean and keeps the std the actor was built with, so PPO from it
+    explores with the run's own ``init_std`` (the anchor's too). A PPO actor's learnt std and a categorical actor
+    (behaviors) are returned as they are."""
     state = init["actor_state_dict"]
-    if "distribution.log_std_param" in state:
-        value = torch.log(std * torch.ones_like(state["distribution.log_std_param"]))  # as rsl-rl builds it
-        return {**init, "actor_state_dict": {**state, "distribution.log_std_param": value}}
-    if "distribution.std_param" in state:
-        return {**init, "actor_state_dict": {**state, "distribution.std_param": torch.full_like(
-            state["distribution.std_param"], float(std))}}
-    return init
+    if init.get("kind") != "flat-il" or "distribution.log_std_param" not in state:
+        return init
+    value = torch.log(std * torch.ones_like(state["distribution.log_std_param"]))  # as rsl-rl builds it
+    return {**init, "actor_state_dict": {**state, "distribution.log_std_param": value}}
 
 
 def _load_weights(alg, resume: dict[str, Any] | None, init: dict[str, Any] | None, info: dict[str, Any]) -> None:

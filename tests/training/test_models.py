@@ -197,5 +197,6 @@ def test_ppo_from_an_imitated_control_actor_explores_with_the_runs_init_std():
     model = build_model(narrow["model"]["actor"], {"occupancy": (1, 64, 36), "road": (12,)}, GROUPS, "actor", 2)
     model.load_state_dict(narrow["actor_state_dict"])
     assert math.isclose(float(model.distribution.log_std_param.detach()[0]), math.log(0.1), rel_tol=1e-6)
-    il = load_checkpoint(shipped_checkpoint("il"))
-    assert with_initial_std(il, 0.1) is il
+    for learnt in ("il", "flat"):  # a behavior actor; a PPO actor's std was learnt: both kept
+        ckpt = load_checkpoint(shipped_checkpoint(learnt))
+        assert with_initial_std(ckpt, 0.1) is ckpt
