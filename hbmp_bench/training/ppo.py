@@ -461,7 +461,8 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
         raise ConfigError("overlap_update overlaps the update with the roll-out of learners that decide at "
                           "different times: --agents N > 1 in continuous fidelity")
     init_kinds = INIT_KINDS["flat" if run.kind == "flat" else "behavior"]
-    init_ckpt = load_checkpoint(init, kinds=init_kinds) if init and resume is None else None
+    init_ckpt = (with_initial_std(load_checkpoint(init, kinds=init_kinds), ppo.init_std)
+                 if init and resume is None else None)
     from rsl_rl.runners import OnPolicyRunner
 
     with session:
@@ -472,7 +473,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
             runner = OnPolicyRunner(env, cfg, log_dir=None, device="cpu")
         info = model_info(env, actor_cfg, critic_cfg, groups)
         alg = runner.alg
-        _load_weights(alg, resume, None if init_ckpt is None else with_initial_std(init_ckpt, ppo.init_std), info)
+        _load_weights(alg, resume, init_ckpt, info)
         if ppo.anchor_coef > 0 and alg.anchor is None:
             raise ConfigError("anchor_coef > 0 needs an --init actor to anchor to")
         init_option = (init_label or init) if resume is None else resume["train"].get("init")

@@ -10,8 +10,8 @@ Every ``validate_every`` episodes the run evaluates its current actor on the ``h
 (Town03 Navigation and Navigation dynamic, the first 20 of 50 each unless told, the paper's protocol,
 episodes drawn from their own seed: not the test suites' episodes) with the package's evaluator (isolated
 processes, as ``evaluate`` runs agents; the actor is the run's own, written by the trainer a moment before, so it
-is trusted: no namespace sandbox, which a host without bubblewrap could not give), appends a row to ``validation.csv`` and writes the actor to ``best.pt`` when its success
-is the best so far (ties: the later one). A fresh run validates its initial actor first (episode 0), so
+is trusted: no namespace sandbox, which a host without bubblewrap could not give), appends a row to
+``validation.csv`` and writes the actor to ``best.pt`` when its success is the best so far (ties: the later one). A fresh run validates its initial actor first (episode 0), so
 the ``il`` baseline is the first row. The training workers wait meanwhile; 40 continuous episodes take
 41-57 s with 2 slots on a quiet 2-core machine (4-7 min where other work ran beside).
 """
