@@ -19,6 +19,7 @@ import argparse
 import importlib.util
 import os
 import shlex
+import shutil
 import time
 
 from hbmp_bench.errors import Interrupted, UserError
@@ -125,6 +126,7 @@ def _cmd_train(args: argparse.Namespace) -> int:
                     save_every=args.save_every, resume=args.resume, command=_command_line(args),
                     progress=not args.no_progress, validate_every=args.validate_every,
                     validate_episodes=args.validate_episodes)
+    created = not os.path.exists(args.out)
     os.makedirs(args.out, exist_ok=True)
     try:
         with exclusive_lock(os.path.join(args.out, "train.lock"), lambda holder: TrainingRunning(
@@ -132,11 +134,23 @@ def _cmd_train(args: argparse.Namespace) -> int:
             result = _train(kind, run, env_config, args, init, ppo)
     except KeyboardInterrupt:  # the trainer has closed its workers on the way out
         raise Interrupted(_resume_hint(args)) from None
+    except Exception:
+        if created:
+            _remove_if_unwritten(args.out)
+        raise
     p = result["progress"]
     print(f"trained {kind}: {p['episodes']} episodes, {p['decisions']} decisions, {p['wall_s'] / 60:.1f} min")
     print(f"run folder: {args.out}  (episodes.csv, curves.png, checkpoint.pt, MODEL_CARD.md)")
     print(f"policy: {result['policy']}  (evaluate: hbmp-bench run --agent {result['policy']})")
     return 0
+
+
+def _remove_if_unwritten(out: str) -> None:
+    """Remove the run folder this command created when the run stopped before writing anything but its lock
+    (a refused option, a worker that failed to start): no empty run folder is left behind."""
+    leftover = set(os.listdir(out)) - {"train.lock"}
+    if not leftover:
+        shutil.rmtree(out, ignore_errors=True)
 
 
 def _check_kind_options(args: argparse.Namespace) -> None:

@@ -459,7 +459,9 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
     env_config = dataclasses.replace(env_config, reward_scale=ppo.reward_scale, expert_labels=False)
     if ppo.overlap_update and not asynchronous_scene(env_config):
         raise ConfigError("overlap_update overlaps the update with the roll-out of learners that decide at "
-                          "different times: --agents N > 1 in continuous fidelity")
+                          "different times (hbmp or hbmp-s with --agents N > 1 in continuous fidelity); here every "
+                          "learner decides at every 0.1 s step (a single learner, event fidelity or flat's "
+                          "controls), so the roll-out waits for the update: leave overlap_update out")
     init_kinds = INIT_KINDS["flat" if run.kind == "flat" else "behavior"]
     init_ckpt = (with_initial_std(load_checkpoint(init, kinds=init_kinds), ppo.init_std)
                  if init and resume is None else None)
