@@ -20,7 +20,9 @@ acted). A slot's transitions are its own decisions in order, so GAE runs along e
 as in single-ego training; a decision's transition spans its whole behavior, as there.
 
 With ``overlap_update`` (``--ppo overlap_update=true``) the workers do not wait for the update: see
-:func:`learn_async`.
+:func:`learn_async`. A scene whose learners all decide at every step (``flat``'s controls, event fidelity) is
+the case where every slot decides and completes at every step (``WorkerVecEnv.step_slots``), so the overlapped
+update runs there by the same loop.
 """
 
 from __future__ import annotations

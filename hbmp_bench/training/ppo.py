@@ -86,7 +86,7 @@ from hbmp_bench.training.run import RunConfig
 from hbmp_bench.training.runlog import EPISODE_COLUMNS, ITERATION_COLUMNS
 from hbmp_bench.training.session import TrainingSession
 from hbmp_bench.training.validation import Validator, validation_results
-from hbmp_bench.training.worker import WorkerEnvConfig, asynchronous_scene
+from hbmp_bench.training.worker import WorkerEnvConfig
 
 MASK_GROUP = "action_mask"
 ANCHOR_KL = ("forward", "reverse")
@@ -267,11 +267,11 @@ class PPOConfig:
         anchor_kl: direction of that KL: ``forward`` KL(π_IL ‖ π) or ``reverse`` KL(π ‖ π_IL).
         temperature: the behavior policy is softmax(logits / temperature) (1: the paper's); see the
             module notes.
-        overlap_update: learners of a scene in continuous fidelity (``--agents N``) only: the workers collect
-            the next roll-out while the update runs, with the policy the update starts from, so each update
-            learns from a roll-out one update older than itself (see
-            :func:`~hbmp_bench.training.async_rollout.learn_async`). False (default): rsl-rl's order, each
-            roll-out with the policy it then updates.
+        overlap_update: the workers collect the next roll-out while the update runs, with the policy the
+            update starts from, so each update learns from a roll-out one update older than itself (see
+            :func:`~hbmp_bench.training.async_rollout.learn_async`); for any scene: learners that decide at
+            their own times (``--agents N`` in continuous fidelity) or at every step (``flat``'s controls, event
+            fidelity). False (default): rsl-rl's order, each roll-out with the policy it then updates.
     """
 
     actor_learning_rate: float = 1e-4
@@ -457,11 +457,6 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
     resume = session.resume
     ppo = _recorded_ppo(resume, ppo) if resume is not None else ppo or PPOConfig()
     env_config = dataclasses.replace(env_config, reward_scale=ppo.reward_scale, expert_labels=False)
-    if ppo.overlap_update and not asynchronous_scene(env_config):
-        raise ConfigError("overlap_update overlaps the update with the roll-out of learners that decide at "
-                          "different times (hbmp or hbmp-s with --agents N > 1 in continuous fidelity); here every "
-                          "learner decides at every 0.1 s step (a single learner, event fidelity or flat's "
-                          "controls), so the roll-out waits for the update: leave overlap_update out")
     init_kinds = INIT_KINDS["flat" if run.kind == "flat" else "behavior"]
     init_ckpt = (with_initial_std(load_checkpoint(init, kinds=init_kinds), ppo.init_std)
                  if init and resume is None else None)
@@ -527,7 +522,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
         runner.logger = RunLogger(runner, after_iteration)
         runner.current_learning_iteration = progress.iterations
         try:
-            if env.asynchronous:  # learners of a scene in continuous fidelity: each decides when its behavior ends
+            if env.asynchronous or ppo.overlap_update:  # learners deciding at their own times, or no wait for the update
                 from hbmp_bench.training.async_rollout import learn_async
 
                 learn_async(runner, env, cfg["num_steps_per_env"], after_iteration, overlap_update=ppo.overlap_update)

@@ -197,12 +197,22 @@ class WorkerVecEnv(VecEnv):
         return self._obs, rewards, dones, extras
 
     def step_slots(self, actions: dict[int, np.ndarray]) -> list[tuple[int, StepReply]]:
-        """One step of every worker of an asynchronous scene (:attr:`asynchronous`): ``actions`` for the slots
-        that decide (global slot index -> (num_actions,) action); returns ``[(slot, reply)]`` of the slots
-        whose transition completed or that must decide (``StepReply.completes`` / ``decides``), and counts
-        the finished episodes (:meth:`pop_episodes`)."""
+        """One step of every worker: ``actions`` for the slots that decide (global slot index ->
+        (num_actions,) action); returns ``[(slot, reply)]`` of the slots whose transition completed or that
+        must decide (``StepReply.completes`` / ``decides``), and counts the finished episodes
+        (:meth:`pop_episodes`). In an asynchronous scene (:attr:`asynchronous`) the slots decide when their
+        behaviors end; in any other every slot decides at every step, so ``actions`` has every slot and
+        every reply completes and decides: the same loop drives both
+        (:class:`~hbmp_bench.training.async_rollout.AsyncRollout`)."""
         if self._closed:
             raise RuntimeError("the VecEnv is closed")
+        if not self.asynchronous:
+            if sorted(actions) != list(range(self.num_envs)):
+                raise RuntimeError(f"every slot decides at every step here: actions for the {self.num_envs} "
+                                   f"slots, got {len(actions)}")
+            acts = np.stack([np.asarray(actions[i]).reshape(self.num_actions) for i in range(self.num_envs)])
+            obs, _, _, extras = self.step(torch.as_tensor(acts))
+            return list(enumerate(self._replies))
         k = self.config.agents
         per_worker = [{} for _ in range(self.num_workers)]
         for slot, action in actions.items():

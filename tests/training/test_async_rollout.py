@@ -162,19 +162,6 @@ def test_with_overlap_update_k_learns_from_the_rollout_acted_by_the_policy_befor
     assert _learn(overlap=True, update_s=0.0).updates == alg.updates
 
 
-def test_overlap_update_is_refused_where_every_learner_decides_every_step(tmp_path):
-    from hbmp_bench.errors import ConfigError
-    from hbmp_bench.training.ppo import PPOConfig, train_ppo
-    from hbmp_bench.training.run import RunConfig
-    from hbmp_bench.training.worker import WorkerEnvConfig
-
-    run = RunConfig(kind="hbmp", episodes=1, out=str(tmp_path / "run"), workers=1)
-    for config in (WorkerEnvConfig(env_kwargs={"fidelity": "continuous"}),  # a single ego
-                   WorkerEnvConfig(env_kwargs={"fidelity": "event"}, agents=2)):
-        with pytest.raises(ConfigError, match="overlap_update"):
-            train_ppo(run, config, PPOConfig(overlap_update=True))
-
-
 @pytest.mark.slow
 def test_learners_of_a_continuous_scene_decide_when_their_behavior_ends():
     from hbmp_bench.training.worker import SceneRunner, WorkerEnvConfig

@@ -148,9 +148,8 @@ def test_clear_errors(il_run, tmp_path, capsys):
     assert main(["train", "hbmp", "--ppo", "anchor_coef=1", "--resume", os.path.join(il_run, "checkpoint.pt"),
                  "--out", str(tmp_path / "x"), *COMMON]) == 2
     assert "recorded" in capsys.readouterr().err
-    assert main(["train", "flat", "--agents", "2", "--ppo", "overlap_update=true", "--out", str(tmp_path / "x"),
-                 *COMMON[:-2]]) == 2  # refused inside the trainer, after the run folder was made: not left behind
-    assert "flat's controls" in capsys.readouterr().err and not os.path.exists(tmp_path / "x")
+    assert main(["train", "flat", "--init", os.path.join(il_run, "policy.pt"), "--out", str(tmp_path / "x"), *COMMON[:-2]]) == 2
+    assert "flat" in capsys.readouterr().err and not os.path.exists(tmp_path / "x")  # refused after the folder was made
     busy = tmp_path / "busy"
     busy.mkdir()
     with exclusive_lock(busy / "train.lock", TrainingRunning):  # a run already writing that folder
@@ -331,16 +330,19 @@ def test_many_learners_are_recorded_and_a_resume_keeps_them(tmp_path):
     assert "--agents 2" in card and "learners: 2 per simulation x 2 workers = 4 slots" in card
 
 
-def test_overlapped_updates_of_continuous_learners_train_and_a_seed_gives_the_same_run(tmp_path):
-    """``--agents 2`` in continuous fidelity with ``--ppo overlap_update=true``: the update runs beside the next
-    roll-out; every iteration fills 2 slots x 8 decisions, and the same seed gives the same losses (the
-    schedule does not depend on timing, the update thread draws no random number)."""
+@pytest.mark.parametrize("kind", ["hbmp", "flat"])
+def test_overlapped_updates_train_and_a_seed_gives_the_same_run(tmp_path, kind):
+    """``--agents 2`` with ``--ppo overlap_update=true``: the update runs beside the next roll-out, for learners
+    that decide when their behaviors end (hbmp, continuous fidelity) and for learners that all decide every
+    0.1 s (flat's controls); every iteration fills 2 slots x 8 decisions, and the same seed gives the same
+    losses (the schedule does not depend on timing, the update thread draws no random number)."""
     runs = []
     for name in ("a", "b"):
         out = str(tmp_path / name)
-        assert main(["train", "hbmp", "--episodes", "4", "--agents", "2", "--workers", "1", "--out", out,
-                     "--seed", "3", "--fidelity", "continuous", "--init", "none", "--no-progress",
-                     "--ppo", "overlap_update=true", "--ppo", "num_steps_per_env=8", "--ppo", "mini_batch_size=8"]) == 0
+        assert main(["train", kind, "--episodes", "4", "--agents", "2", "--workers", "1", "--out", out,
+                     "--seed", "3", "--init", "none", "--no-progress", "--ppo", "overlap_update=true",
+                     "--ppo", "num_steps_per_env=8", "--ppo", "mini_batch_size=8",
+                     *(["--fidelity", "continuous"] if kind == "hbmp" else [])]) == 0
         runs.append(read_csv(os.path.join(out, "iterations.csv")))
     first, second = runs
     decisions = first["decisions"].tolist()
