@@ -1,9 +1,11 @@
 """PPO's training throughput: learners per simulation and the overlapped update, measured in one run.
 
-    python benchmarks/training_throughput.py [--episodes 120] [--setups 1x2 8x2 8x2+overlap] [--json FILE]
+    python benchmarks/training_throughput.py [--kind hbmp|flat] [--episodes 120] [--setups 1x2 8x2 8x2+overlap]
+        [--json FILE]
 
-Each setup (``LEARNERSxWORKERS``, ``+overlap`` for ``--ppo overlap_update=true``) trains the shipped ``hbmp``
-recipe (PPO from ``il`` in continuous fidelity on ``Training-v0``, seed 0, no critic warm-up, no validation)
+Each setup (``LEARNERSxWORKERS``, ``+overlap`` for ``--ppo overlap_update=true``) trains a recipe (``--kind
+hbmp``: the shipped ``hbmp``'s, PPO from ``il`` in continuous fidelity; ``flat``: ``training_runs/flat-ilrl``'s,
+PPO on controls from ``flat-il``; both on ``Training-v0``, seed 0, no critic warm-up, no validation)
 for ``--episodes`` episodes with ``hbmp-bench train``, one setup after the other in fresh folders, so they
 meet the same machine; the ratios to the first setup are the figures to read. From each run's
 ``iterations.csv``: seconds per iteration after the first (the start, the first roll-out and, overlapped, the
@@ -23,9 +25,14 @@ import sys
 import tempfile
 import time
 
-RECIPE = ["--scenario", "hbmp_bench/Training-v0", "--seed", "0", "--fidelity", "continuous", "--road-profile",
-          "metric", "--density", "regular", "--init", "il", "--ppo", "anchor_kl=reverse", "--ppo", "anchor_coef=0.1",
-          "--critic-warmup", "0", "--validate-every", "0", "--no-progress"]
+COMMON = ["--scenario", "hbmp_bench/Training-v0", "--seed", "0", "--density", "regular", "--ppo", "anchor_kl=reverse",
+          "--ppo", "anchor_coef=0.1", "--critic-warmup", "0", "--validate-every", "0", "--no-progress"]
+RECIPES = {
+    "hbmp": ["--fidelity", "continuous", "--road-profile", "metric", "--init", "il", *COMMON],
+    "flat": ["--init", "flat-il", "--ppo", "init_std=0.1", "--ppo", "gamma=0.999", "--ppo", "lam=0.995",
+             "--ppo", "mini_batch_size=256", *COMMON],
+}
+"""The ``hbmp-bench train`` options of each ``--kind`` (the run's own, less its validation and warm-up)."""
 SETUP = re.compile(r"^(\d+)x(\d+)(\+overlap)?$")
 
 
@@ -37,18 +44,20 @@ def parse_setup(text: str) -> tuple[int, int, bool]:
     return int(match.group(1)), int(match.group(2)), bool(match.group(3))
 
 
-def measure(setup: str, episodes: int, folder: str) -> dict:
-    """Train one setup in ``folder``; its throughput figures."""
+def measure(setup: str, episodes: int, folder: str, kind: str = "hbmp") -> dict:
+    """Train one setup of ``kind`` in ``folder``; its throughput figures."""
     from hbmp_bench.training.runlog import read_csv
 
     agents, workers, overlap = parse_setup(setup)
     out = os.path.join(folder, setup.replace("+", "-"))
-    command = [sys.executable, "-m", "hbmp_bench.cli", "train", "hbmp", *RECIPE, "--episodes", str(episodes),
+    command = [sys.executable, "-m", "hbmp_bench.cli", "train", kind, *RECIPES[kind], "--episodes", str(episodes),
                "--workers", str(workers), "--agents", str(agents), "--out", out]
     if overlap:
         command += ["--ppo", "overlap_update=true"]
     start = time.perf_counter()
-    subprocess.run(command, check=True, stdout=subprocess.DEVNULL)
+    done = subprocess.run(command, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    if done.returncode != 0:
+        raise SystemExit(f"{setup}: hbmp-bench train failed: {done.stderr.strip().splitlines()[-1:]}")
     wall = time.perf_counter() - start
     rows = read_csv(os.path.join(out, "iterations.csv"))
     wall_s, decisions = rows["wall_s"], rows["decisions"]
@@ -63,6 +72,7 @@ def measure(setup: str, episodes: int, folder: str) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--kind", choices=sorted(RECIPES), default="hbmp", help="the recipe trained (default hbmp)")
     parser.add_argument("--episodes", type=int, default=120, help="episodes per setup (default 120)")
     parser.add_argument("--setups", nargs="+", default=["1x2", "8x2", "8x2+overlap"], type=str,
                         help="LEARNERSxWORKERS[+overlap] each (default: 1x2 8x2 8x2+overlap); ratios to the first")
@@ -71,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     for setup in args.setups:
         parse_setup(setup)  # every setup checked before the first one trains
     with tempfile.TemporaryDirectory(prefix="hbmp-train-bench-") as folder:
-        rows = [measure(setup, args.episodes, folder) for setup in args.setups]
+        rows = [measure(setup, args.episodes, folder, args.kind) for setup in args.setups]
     base = rows[0]
     for row in rows:
         row["decisions_per_s_ratio"] = round(row["decisions_per_s"] / base["decisions_per_s"], 2)
@@ -81,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{r['setup']:<14}{r['s_per_iteration']:>12}{r['decisions_per_s']:>13}{r['decisions_per_s_ratio']:>6}"
               f"{r['episodes_per_min']:>14}{r['episodes_per_min_ratio']:>6}")
     if args.json:
-        result = {"episodes": args.episodes, "machine": f"{platform.system()} {platform.machine()}, "
+        result = {"kind": args.kind, "episodes": args.episodes, "machine": f"{platform.system()} {platform.machine()}, "
                   f"{os.cpu_count()} cores, Python {platform.python_version()}", "setups": rows}
         with open(args.json, "w") as f:
             json.dump(result, f, indent=1)

@@ -353,8 +353,8 @@ class PPOConfig:
         """The ``train_cfg`` dict of rsl-rl's ``OnPolicyRunner`` (a fresh dict: the runner mutates it)."""
         batch = num_envs * self.num_steps_per_env
         if batch % self.mini_batch_size:
-            raise ConfigError(f"workers × num_steps_per_env = {batch} is not a multiple of the mini-batch "
-                             f"size {self.mini_batch_size}")
+            raise ConfigError(f"slots (workers × agents) × num_steps_per_env = {num_envs} × {self.num_steps_per_env} "
+                              f"= {batch} is not a multiple of the mini-batch size {self.mini_batch_size}")
         return {
             "num_steps_per_env": self.num_steps_per_env,
             "save_interval": 10**9,

@@ -161,6 +161,8 @@ def test_ppo_config_defaults_are_the_papers_and_validate():
     assert runner["algorithm"]["num_mini_batches"] * cfg.mini_batch_size == 2 * cfg.num_steps_per_env
     with pytest.raises(ValueError, match="multiple of the mini-batch"):
         PPOConfig(num_steps_per_env=10).runner_cfg(1, GROUPS, *behavior_model_cfgs())
+    with pytest.raises(ValueError, match=r"slots \(workers × agents\) × num_steps_per_env = 2 × 64 = 128"):
+        PPOConfig(mini_batch_size=256).runner_cfg(2, GROUPS, *behavior_model_cfgs())
     with pytest.raises(ValueError, match="schedule"):
         TwoRatePPO(None, None, None, schedule="adaptive")
 
