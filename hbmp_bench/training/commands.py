@@ -272,8 +272,8 @@ def add_commands(subparsers) -> None:
                    help="learners per simulation: N goal-directed vehicles in each worker's scene, each a slot of the "
                         "batch (workers x N), respawned at a new start when its episode ends (in continuous "
                         "fidelity each decides when its behavior ends; --ppo overlap_update=true runs PPO's update "
-                        "while the workers drive, here and with flat's controls). Recorded in the checkpoint: a --resume keeps it. Default 1: the "
-                        "single ego")
+                        "while the workers drive, here and with flat's controls). Recorded in the checkpoint: a "
+                        "--resume keeps it. Default 1: the single ego")
     p.add_argument("--backend", choices=("process", "ray"), default="process",
                    help="where the environment workers run: local processes (default) or Ray actors")
     p.add_argument("--address", default=None,

@@ -353,8 +353,9 @@ class PPOConfig:
         """The ``train_cfg`` dict of rsl-rl's ``OnPolicyRunner`` (a fresh dict: the runner mutates it)."""
         batch = num_envs * self.num_steps_per_env
         if batch % self.mini_batch_size:
-            raise ConfigError(f"slots (workers × agents) × num_steps_per_env = {num_envs} × {self.num_steps_per_env} "
-                              f"= {batch} is not a multiple of the mini-batch size {self.mini_batch_size}")
+            raise ConfigError(f"slots (workers × agents) × num_steps_per_env = {num_envs} × "
+                              f"{self.num_steps_per_env} = {batch} is not a multiple of the mini-batch size "
+                              f"{self.mini_batch_size}")
         return {
             "num_steps_per_env": self.num_steps_per_env,
             "save_interval": 10**9,
@@ -522,7 +523,7 @@ def train_ppo(run: RunConfig, env_config: WorkerEnvConfig, ppo: PPOConfig | None
         runner.logger = RunLogger(runner, after_iteration)
         runner.current_learning_iteration = progress.iterations
         try:
-            if env.asynchronous or ppo.overlap_update:  # learners deciding at their own times, or no wait for the update
+            if env.asynchronous or ppo.overlap_update:  # learners deciding at their own times, or no update wait
                 from hbmp_bench.training.async_rollout import learn_async
 
                 learn_async(runner, env, cfg["num_steps_per_env"], after_iteration, overlap_update=ppo.overlap_update)

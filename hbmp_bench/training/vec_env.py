@@ -211,7 +211,7 @@ class WorkerVecEnv(VecEnv):
                 raise RuntimeError(f"every slot decides at every step here: actions for the {self.num_envs} "
                                    f"slots, got {len(actions)}")
             acts = np.stack([np.asarray(actions[i]).reshape(self.num_actions) for i in range(self.num_envs)])
-            obs, _, _, extras = self.step(torch.as_tensor(acts))
+            self.step(torch.as_tensor(acts))
             return list(enumerate(self._replies))
         k = self.config.agents
         per_worker = [{} for _ in range(self.num_workers)]

@@ -148,8 +148,10 @@ def test_clear_errors(il_run, tmp_path, capsys):
     assert main(["train", "hbmp", "--ppo", "anchor_coef=1", "--resume", os.path.join(il_run, "checkpoint.pt"),
                  "--out", str(tmp_path / "x"), *COMMON]) == 2
     assert "recorded" in capsys.readouterr().err
-    assert main(["train", "flat", "--init", os.path.join(il_run, "policy.pt"), "--out", str(tmp_path / "x"), *COMMON[:-2]]) == 2
-    assert "flat" in capsys.readouterr().err and not os.path.exists(tmp_path / "x")  # refused after the folder was made
+    # an il checkpoint as flat's --init: refused by the trainer, after the run folder was made; not left behind
+    assert main(["train", "flat", "--init", os.path.join(il_run, "policy.pt"), "--out", str(tmp_path / "x"),
+                 *COMMON[:-2]]) == 2
+    assert "flat" in capsys.readouterr().err and not os.path.exists(tmp_path / "x")
     busy = tmp_path / "busy"
     busy.mkdir()
     with exclusive_lock(busy / "train.lock", TrainingRunning):  # a run already writing that folder
