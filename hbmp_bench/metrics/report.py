@@ -64,8 +64,9 @@ from hbmp_bench.vocabulary import COLLISION_KINDS, DETECTED_KINDS, VIOLATION_KIN
 OUTCOMES = ("success", "wrong_lane", "collision", "red_light", "timeout", "left_network", "agent_error")
 """Columns of the failure-count view, in the paper's figure order, then the two ends the paper's figure
 has no bar for: ``left_network`` (the ego left the road network, e.g. drove past its goal a lane off)
-and agent errors. Under episode rules that end at the first violation, each scored episode has
-exactly one of these outcomes."""
+and agent errors. An episode's outcome is what ended it (:func:`episode_outcomes`), so each scored
+episode has exactly one, under every suite's rules; the infractions along the way are counted by
+:func:`km_between_infractions`."""
 
 INFRACTIONS = ("collision", *DETECTED_KINDS)
 """Event kinds of the km-between-infractions view (``collision`` = all collisions)."""
@@ -221,10 +222,28 @@ def success_table(df: pd.DataFrame) -> pd.DataFrame:
     return table
 
 
+def episode_outcomes(df: pd.DataFrame) -> pd.Series:
+    """One of ``OUTCOMES`` per row of ``df``: what ended the episode. ``end_reason`` names it, in the
+    world's own precedence (a collision in the step of a violation ends the episode as a collision);
+    an end by ``violation`` is ``wrong_lane`` (wrong lane or off-road) unless only a red light was
+    counted. Sim errors and capped episodes (not scored) get ``""``."""
+    reason = df["end_reason"]
+    lane = (df["wrong_lane"] + df["off_road"]) > 0
+    label = pd.Series("", index=df.index, dtype=object)
+    label[reason == "goal"] = "success"
+    label[reason == "collision"] = "collision"
+    label[(reason == "violation") & lane] = "wrong_lane"
+    label[(reason == "violation") & ~lane] = "red_light"
+    for end in ("timeout", "left_network", AGENT_ERROR):  # (AGENT_ERROR is "agent_error")
+        label[reason == end] = end
+    return label
+
+
 def failure_counts(df: pd.DataFrame) -> pd.DataFrame:
-    """Episodes per outcome (``OUTCOMES`` columns plus ``episodes``), index (result_set, town), and
-    ``sim_errors``: episodes not scored because the simulator failed (a town whose episodes all
-    ended so has a row with 0 episodes)."""
+    """Scored episodes per outcome (``OUTCOMES`` columns, each episode in exactly one: what ended it,
+    :func:`episode_outcomes`) plus ``episodes``, index (result_set, town), and ``sim_errors``:
+    episodes not scored because the simulator failed (a town whose episodes all ended so has a row
+    with 0 episodes)."""
     rows = []
     for result_set in _sets(df):
         for town in _towns(df):
@@ -232,15 +251,10 @@ def failure_counts(df: pd.DataFrame) -> pd.DataFrame:
             if everything.empty:
                 continue
             part = scored(everything)
+            outcome = episode_outcomes(part)
             rows.append({
                 "result_set": result_set, "town": town, "episodes": len(part),
-                "success": int(part["success"].astype(bool).sum()),
-                "wrong_lane": int(((part["wrong_lane"] + part["off_road"]) > 0).sum()),
-                "collision": int((part[list(COLLISION_KINDS)].sum(axis=1) > 0).sum()),
-                "red_light": int((part["red_light"] > 0).sum()),
-                "timeout": int(part["timeout"].astype(bool).sum()),
-                "left_network": int((part["end_reason"] == "left_network").sum()),
-                "agent_error": int((part["end_reason"] == AGENT_ERROR).sum()),
+                **{name: int((outcome == name).sum()) for name in OUTCOMES},
                 "sim_errors": int((everything["end_reason"] == SIM_ERROR).sum()),
             })
     columns = ["result_set", "town", "episodes", *OUTCOMES, "sim_errors"]

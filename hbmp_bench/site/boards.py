@@ -126,7 +126,7 @@ def load_board(board: Board) -> BoardData:
 
 def breakdown(df: pd.DataFrame) -> pd.DataFrame:
     """Per (source file, town, task) of a report frame: the outcome counts of ``report.failure_counts``
-    (episodes with each outcome), ``km_driven`` and ``infraction_events`` (the events of
+    (scored episodes by what ended them), ``km_driven`` and ``infraction_events`` (the events of
     :data:`INFRACTION_KINDS`, as the summary's km per infraction counts them), ``success_pct``
     and ``infractions_per_km`` (0 where nothing was driven)."""
     from hbmp_bench.metrics import report

@@ -297,8 +297,8 @@ def _breakdown_section(data: BoardData, labels: dict[str, str],
     by_file = {d["_file"]: d for d in data.entries}
     rows = [_breakdown_row(by_file[r["source"]], r, labels) for r in data.breakdown.to_dict(orient="records")]
     return ["<h2>Per town and task</h2>\n",
-            '<p class="note">Each entry\'s episodes per town × task: episodes with each outcome (from '
-            '<code>hbmp-bench report</code>\'s outcome counts), km driven and infraction events per km.</p>\n',
+            '<p class="note">Each entry\'s episodes per town × task: episodes per outcome, what ended each '
+            '(<code>hbmp-bench report</code>\'s outcome counts), km driven and infraction events per km.</p>\n',
             filters("breakdown", selects),
             table("breakdown", ["agent", "fidelity", "privileged", "town", "task", "episodes", "success %",
                                 "collision", "red light", "timeout", "wrong lane / off-road", "left network",

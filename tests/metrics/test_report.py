@@ -66,8 +66,8 @@ def test_success_table_paper_layout_with_a_column_per_agent(two_sets):
 
 def test_failure_counts_count_episodes_per_outcome(two_sets):
     counts = failure_counts(two_sets)
-    a1 = counts.loc[("a", "Town01")]
-    assert a1.to_dict() == {"episodes": 3, "success": 2, "wrong_lane": 1, "collision": 1, "red_light": 1,
+    a1 = counts.loc[("a", "Town01")]  # what ended each episode: the infractions on the way are not ends
+    assert a1.to_dict() == {"episodes": 3, "success": 2, "wrong_lane": 0, "collision": 0, "red_light": 0,
                             "timeout": 1, "left_network": 0, "agent_error": 0, "sim_errors": 0}
     assert counts.loc[("a", "Town02"), "agent_error"] == 1 and counts.loc[("a", "Town02"), "episodes"] == 2
     assert counts.loc[("a", "Town02"), "sim_errors"] == 1  # not scored, but shown
@@ -225,9 +225,25 @@ def test_an_episode_that_left_the_network_has_its_own_outcome():
     assert (row["success"], row["left_network"], row["timeout"]) == (1, 1, 0)
 
 
+def test_an_episode_has_one_outcome_when_two_events_share_its_last_step():
+    """Under the paper's protocol the first violation ends the episode, but a car that leaves the road
+    onto a pedestrian collides and goes off-road in one 0.1 s step: the world ends it as a collision
+    (its precedence), and so does the count; an end by violation is a wrong lane unless only a red
+    light was counted."""
+    counts = failure_counts(records_frame([
+        failed(episode=0, end_reason="collision", timeout=False, collision_pedestrian=1, off_road=1),
+        failed(episode=1, end_reason="violation", timeout=False, off_road=1, red_light=1),
+        failed(episode=2, end_reason="violation", timeout=False, red_light=1),
+        failed(episode=3, end_reason="violation", timeout=False, wrong_lane=1),
+    ]))
+    row = counts.loc[("a", "Town01")].to_dict()
+    assert row == {"episodes": 4, "success": 0, "wrong_lane": 2, "collision": 1, "red_light": 1, "timeout": 0,
+                   "left_network": 0, "agent_error": 0, "sim_errors": 0}
+
+
 def test_every_paper_protocol_episode_on_the_committed_board_has_exactly_one_outcome():
-    """An auditor's check on the shipped `hbmp` board: episodes end at the first violation, so the
-    outcomes of every (agent, town) row add up to its episodes."""
+    """An auditor's check on the shipped `hbmp` board: the outcomes of every (agent, town) row add up
+    to its episodes, and each count matches the records' own end reasons."""
     from pathlib import Path
 
     board = Path(__file__).resolve().parents[2] / "leaderboards" / "hbmp"
@@ -236,3 +252,9 @@ def test_every_paper_protocol_episode_on_the_committed_board_has_exactly_one_out
     assert len(counts) >= 25
     mismatched = counts[counts[outcomes].sum(axis=1) != counts["episodes"]]
     assert mismatched.empty, mismatched
+    episodes = [e for path in board.glob("*.json") for e in json.loads(path.read_text())["episodes"]
+                if e["end_reason"] not in ("sim_error", "decision_cap")]
+    by_reason = pd.Series([e["end_reason"] for e in episodes]).value_counts()
+    assert counts["success"].sum() == by_reason.get("goal", 0)
+    assert counts["collision"].sum() == by_reason.get("collision", 0)
+    assert counts["wrong_lane"].sum() + counts["red_light"].sum() == by_reason.get("violation", 0)

@@ -187,8 +187,11 @@ def test_numbers_on_the_board_pages_are_the_results_files(site, browser_page):
                         episodes = [e for e in doc["episodes"] if e["town"] == town
                                     and TASK_LABELS[e["task"]] == row["task"]]
                         assert int(cells["episodes"]) == len(episodes)
-                        assert int(cells["timeout"]) == sum(e["timeout"] for e in episodes)
-                        assert int(cells["red_light"]) == sum(e["red_light"] > 0 for e in episodes)
+                        ends = [e["end_reason"] for e in episodes]  # an outcome is what ended the episode
+                        assert int(cells["timeout"]) == ends.count("timeout")
+                        assert int(cells["collision"]) == ends.count("collision")
+                        assert int(cells["red_light"]) == sum(e["end_reason"] == "violation" and e["red_light"] > 0
+                                                              and e["wrong_lane"] + e["off_road"] == 0 for e in episodes)
                         assert cells["km_driven"] == one(sum(e["distance_m"] for e in episodes) / 1000, 2)
         provenance = {r["attrs"]["file"]: r["cells"] for r in rows(page, "provenance")}
         for name, doc in files.items():
