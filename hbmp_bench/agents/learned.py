@@ -1,5 +1,5 @@
-"""Learned agents: il (DAgger), hbmp (PPO, r_k + r_T), hbmp-s (PPO, r_T only), flat (PPO on controls) and
-flat-il (DAgger on the expert's controls, CIL).
+"""Learned agents: il (DAgger), hbmp (PPO, r_k + r_T), hbmp-s (PPO, r_T only), flat (PPO on controls),
+flat-il (DAgger on the expert's controls, CIL) and flat-ilrl (PPO on controls from flat-il, CIRL).
 
 Each loads a checkpoint shipped in ``hbmp_bench/agents/checkpoints/<name>.pt`` (with a model card
 ``<name>.md`` beside it), produced by the package's own ``hbmp-bench train <name>``; any other
@@ -35,8 +35,17 @@ TRAIN_COMMANDS = {
     "flat": "hbmp-bench train flat --episodes 1000 --workers 2 --seed 0 --density regular --out runs/flat",
     "flat-il": "hbmp-bench train flat-il --episodes 200 --workers 1 --seed 0 --density regular --validate-every 50 "
                "--validate-episodes 5 --out runs/flat-il",
+    "flat-ilrl": "hbmp-bench train flat --init flat-il --agents 8 --episodes 3000 --workers 2 --seed 0 --density regular "
+                 "--ppo init_std=0.1 --ppo anchor_kl=reverse --ppo anchor_coef=0.1 --ppo gamma=0.999 --ppo lam=0.995 "
+                 "--ppo mini_batch_size=256 --ppo overlap_update=true --validate-every 250 --out runs/flat-ilrl",
 }
-"""How each shipped checkpoint is (re)produced; the model card beside it has the exact command used."""
+"""How each shipped checkpoint is (re)produced; the model card beside it has the exact command used. The third
+word is the training kind the checkpoint records (``flat-ilrl`` is the ``flat`` kind started from ``flat-il``)."""
+
+
+def trained_kind(name: str) -> str:
+    """The training kind of the shipped agent ``name`` (its checkpoint's ``kind``): ``flat`` for ``flat-ilrl``."""
+    return TRAIN_COMMANDS[name].split()[2]
 
 OBSERVATION_OPTIONS = ("observation", "road_profile")
 """Environment options that change what the policy sees (so an evaluation must match them)."""
@@ -52,7 +61,8 @@ def shipped_checkpoint(name: str) -> str:
     if not os.path.isfile(path):
         raise FileNotFoundError(
             f"no shipped checkpoint for agent {name!r} (hbmp_bench/agents/checkpoints/{name}.pt). Produce it with "
-            f"`{TRAIN_COMMANDS[name]}`, then copy runs/{name}/policy.pt to that place, or load any checkpoint "
+            f"`{TRAIN_COMMANDS[name]}`, then copy runs/{name}/best.pt (policy.pt without --validate-every) to "
+            f"that place, or load any checkpoint "
             f"with --agent path/to/policy.pt")
     return path
 
