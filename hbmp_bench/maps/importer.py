@@ -228,9 +228,6 @@ def import_map(path: str | Path, name: str, *, like: str | None = None, sidewalk
             "curve_speed_lanes": curves_lowered,
         }
         _install(final, info, name)
-    from .roadnet import load_road_network
-
-    load_road_network.cache_clear()
     return user_maps_dir() / f"{name}{NET_SUFFIX}"
 
 
@@ -360,9 +357,6 @@ def remove_map(name: str) -> None:
         raise UnknownNameError("imported map", name, user_maps())
     (user_maps_dir() / f"{name}{NET_SUFFIX}").unlink(missing_ok=True)
     info_path(name).unlink(missing_ok=True)
-    from .roadnet import load_road_network
-
-    load_road_network.cache_clear()
 
 
 __all__ = ["INFO_SUFFIX", "LIGHTS", "import_map", "map_info", "remove_map", "validate_net"]

@@ -14,6 +14,7 @@ from __future__ import annotations
 import functools
 import heapq
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from types import MappingProxyType
@@ -860,7 +861,13 @@ def point_along(shape: np.ndarray, pos: float) -> np.ndarray:
     return shape[i] + frac * seg[i]
 
 
-@functools.lru_cache(maxsize=16)
 def load_road_network(net_path: str) -> RoadNetwork:
-    """The (process-wide cached) RoadNetwork of a net file."""
+    """The (process-wide cached) RoadNetwork of a net file; a file written again since it was read (a map
+    imported again with ``force``, which replaces the file) is read again; FileNotFoundError once it is gone."""
+    stat = os.stat(net_path)
+    return _read_road_network(net_path, stat.st_ino, stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=16)
+def _read_road_network(net_path: str, inode: int, mtime_ns: int, size: int) -> RoadNetwork:
     return RoadNetwork.from_sumo(net_path)

@@ -18,7 +18,10 @@ def _tasks(n=1):
 @pytest.mark.parametrize("factory", ["faulty_envs:hang_once", "faulty_envs:crash_once"])
 def test_a_hung_or_crashed_simulation_is_retried_once(factory, tmp_path, monkeypatch):
     monkeypatch.setenv("HBMP_TEST_FAULT_DIR", str(tmp_path))
-    limits = RunnerLimits(decision_timeout_s=1.0, watchdog_s=1.5, env_factory=factory)
+    # the watchdog's allowance must exceed a sound env process's longest silence: its start (imports, the net,
+    # SUMO, the first reset) took 1.2 s on an idle 2-core machine and more than 1.5 s on a loaded or cold one,
+    # which killed both attempts before the fault; the hang (10^6 s) is caught all the same
+    limits = RunnerLimits(decision_timeout_s=5.0, watchdog_s=6.0, env_factory=factory)
     start = time.monotonic()
     with EpisodePool(1, limits) as pool:
         (outcome,) = list(pool.imap(_tasks()))

@@ -12,6 +12,7 @@ import pytest
 from hbmp_bench.errors import UnknownNameError, UserError
 from hbmp_bench.maps import (TOWNS, available_maps, import_map, map_hash, map_info, map_stats, net_path,
                              remove_map, user_maps_dir)
+from hbmp_bench.scenarios import road_network
 
 # One straight 200 m road with one driving lane per direction.
 XODR = """<?xml version="1.0" encoding="UTF-8"?>
@@ -146,6 +147,7 @@ def test_import_refuses_to_overwrite_without_force_and_remove(tmp_path):
     src.write_text(XODR, encoding="utf-8")
     import_map(src, "straight")
     before = map_info("straight")
+    assert len(road_network("straight").edge_length) < 10  # the process's cached lane graph of the first import
     other = tmp_path / "copy.net.xml"
     shutil.copyfile(net_path("Town02"), other)
     with pytest.raises(UserError, match="--force"):
@@ -154,8 +156,11 @@ def test_import_refuses_to_overwrite_without_force_and_remove(tmp_path):
     import_map(other, "straight", force=True)
     assert map_info("straight")["source"] == "copy.net.xml"
     assert map_stats("straight")["drivable_edges"] == map_stats("Town02")["drivable_edges"]
+    assert road_network("straight").edge_length == road_network("Town02").edge_length  # read again, not cached
     remove_map("straight")
     assert "straight" not in available_maps() and _user_files() == []
+    with pytest.raises(UnknownNameError):
+        road_network("straight")
     with pytest.raises(UnknownNameError):
         remove_map("straight")
     with pytest.raises(UserError):

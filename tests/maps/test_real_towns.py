@@ -24,6 +24,32 @@ REAL_TOWNS = sorted(p.name[: -len(".xodr")] for p in CARLA_DIR.glob("*.xodr")) i
 pytestmark = pytest.mark.skipif(not REAL_TOWNS, reason="no CARLA towns at hand (set HBMP_CARLA_MAPS)")
 
 
+@pytest.fixture(scope="module")
+def _module_maps(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("hbmp_data")
+
+
+@pytest.fixture(autouse=True)
+def _isolated_user_maps(_module_maps, monkeypatch):
+    """This module's tests share one user data folder (not the real one): each import of a CARLA town is made
+    once (:func:`_import`), not once per test (64 imports of 0.5-2 s each)."""
+    monkeypatch.setenv("HBMP_BENCH_DATA", str(_module_maps))
+
+
+_IMPORTED: dict[str, tuple] = {}
+
+
+def _import(src: Path, name: str, **options) -> None:
+    """``import_map(src, name, **options)`` the first time this module asks for ``name``; a second ask must
+    be for the same source and options (a test that wants others names its map differently)."""
+    key = (str(src), tuple(sorted(options.items())))
+    if name in _IMPORTED:
+        assert _IMPORTED[name] == key, (name, _IMPORTED[name], key)
+        return
+    import_map(src, name, **options)
+    _IMPORTED[name] = key
+
+
 def _sources(town: str) -> list[tuple[str, Path]]:
     out = [("xodr", CARLA_DIR / f"{town}.xodr")]
     if (CARLA_DIR / f"{town}.net.xml").is_file():
@@ -45,7 +71,7 @@ def _source_lights(path: Path) -> int:
 def test_xodr_import_matches_carlas_own_net(town):
     stats = {}
     for kind, src in _sources(town):
-        import_map(src, f"{town}_{kind}")
+        _import(src, f"{town}_{kind}")
         stats[kind] = map_stats(f"{town}_{kind}")
     xodr = stats["xodr"]
     assert xodr["walkable_edges"] > 0 and xodr["crossings"] > 0
@@ -68,7 +94,7 @@ def test_every_episode_of_every_suite_starts_and_ends_on_a_driving_lane(town):
     43 of 335 episodes (.xodr) starting in a lane that had to leave the route or arrive beside the goal)."""
     for kind, src in _sources(town):
         name = f"{town}_{kind}"
-        import_map(src, name)
+        _import(src, name)
         types = _lane_types(net_path(name))
         net = road_network(name)
         for suite in SUITES.values():
@@ -91,9 +117,9 @@ def test_every_episode_of_every_suite_starts_and_ends_on_a_driving_lane(town):
 @pytest.mark.parametrize("town", REAL_TOWNS[:1] or ["none"])
 def test_lights_are_the_sources_unless_asked(town):
     src = CARLA_DIR / f"{town}.xodr"
-    import_map(src, "own")
-    import_map(src, "guessed", guess_lights=True)
-    import_map(src, "lawful", lights="lawful")
+    _import(src, "own")
+    _import(src, "guessed", guess_lights=True)
+    _import(src, "lawful", lights="lawful")
     own, guessed, lawful = (map_stats(n) for n in ("own", "guessed", "lawful"))
     assert guessed["tls_junctions"] >= own["tls_junctions"] == lawful["tls_junctions"]
     assert lawful["import"]["lights"] == "lawful" and lawful["tls_all_red_s"] == [ALL_RED_TIME_S, ALL_RED_TIME_S]
@@ -107,8 +133,8 @@ def test_like_borrows_a_built_in_towns_task_parameters():
     if not REAL_TOWNS:
         pytest.skip("no CARLA town")
     src = CARLA_DIR / f"{REAL_TOWNS[0]}.xodr"
-    import_map(src, "own")
-    import_map(src, "like02", like="Town02")
+    _import(src, "own")
+    _import(src, "like02", like="Town02")
     like = suite_episodes("corl2017", "like02", "NavigationDynamic")[0].traffic
     assert (like.vehicles, like.pedestrians) == (15, 50)
     own_nav = [e.route_length_m for e in suite_episodes("corl2017", "own", "Navigation")]
@@ -125,7 +151,7 @@ def test_dynamic_episodes_start_with_their_traffic(town):
     from hbmp_bench.envs import BehaviorEnv
 
     for kind, src in _sources(town):
-        import_map(src, f"{town}_{kind}")
+        _import(src, f"{town}_{kind}")
         env = BehaviorEnv(town=f"{town}_{kind}", task="NavigationDynamic", fidelity="event")
         for index in range(3):
             env.reset(seed=index, options={"episode_index": index})
@@ -143,7 +169,7 @@ def test_the_followed_lane_reaches_over_a_routes_short_pieces(town):
     left the road."""
     for kind, src in _sources(town):
         name = f"{town}_{kind}"
-        import_map(src, name)
+        _import(src, name)
         net = road_network(name)
         for suite in ("corl2017", "hbmp"):
             for task in TASKS:
@@ -167,7 +193,7 @@ def test_the_continuous_ego_turns_after_split_pieces():
     from hbmp_bench.envs import BehaviorEnv
     from hbmp_bench.rollout import run_episode
 
-    import_map(CARLA_DIR / "Town07.net.xml", "T07n", lights="lawful")
+    _import(CARLA_DIR / "Town07.net.xml", "T07n", lights="lawful")
     agent = load_agent("expert")
     env = BehaviorEnv(town="T07n", task="OneTurn", suite="corl2017", fidelity="continuous", **agent_env_kwargs(agent))
     pieces = ("6", "5#1", "5#0", "4", "3", "-12")
@@ -189,8 +215,8 @@ def test_sumo_keeps_its_lanes_by_the_detectors_on_every_route(town):
     from hbmp_bench.evaluation.lane_audit import audit_lane_keeping
 
     for kind, src in _sources(town):
-        name = f"{town}_{kind}"
-        import_map(src, name, lights="lawful")
+        name = f"{town}_{kind}_lawful"
+        _import(src, name, lights="lawful")
         audit = audit_lane_keeping(name)
         assert audit.episodes == sum(selection_size(s.name, [name], s.tasks, range(s.episodes_per_task))
                                      for s in SUITES.values())
@@ -209,7 +235,7 @@ def test_no_crossing_where_a_road_merely_continues(town):
 
     for kind, src in _sources(town):
         name = f"{town}_{kind}"
-        import_map(src, name)
+        _import(src, name)
         root = ET.parse(net_path(name)).getroot()
         neighbours = node_neighbours(root)
         kept = crossings_by_node(root)
@@ -229,8 +255,8 @@ def test_the_continuous_experts_speeds_in_bends_stay_physical(town):
 
     agent = load_agent("expert")
     for kind, src in _sources(town):
-        name = f"{town}_{kind}"
-        import_map(src, name, lights="lawful")
+        name = f"{town}_{kind}_lawful"
+        _import(src, name, lights="lawful")
         for task in ("OneTurn", "Navigation"):
             env = BehaviorEnv(town=name, task=task, suite="hbmp", fidelity="continuous", **agent_env_kwargs(agent))
             try:
@@ -259,7 +285,7 @@ def test_the_carla_board_reproduces_from_carlas_files(entry):
     from hbmp_bench.maps import map_hash
 
     for town in ("Town01", "Town02"):
-        import_map(CARLA_DIR / f"{town}.xodr", f"CARLA_{town}", like=town, lights="lawful")
+        _import(CARLA_DIR / f"{town}.xodr", f"CARLA_{town}", like=town, lights="lawful")
     doc = json.loads(entry.read_text(encoding="utf-8"))
     assert doc["selection"]["towns"] == ["CARLA_Town01", "CARLA_Town02"] and doc["summary"]["episodes"] > 0
     verify_results(doc, str(entry), against_suite=True)  # raises on anything that does not add up
