@@ -118,6 +118,15 @@ def test_targets_follow_their_parameters():
     assert "import hbmp_bench [s]" not in {c["name"] for c in target_checks({**_result(), "import": {}})}
 
 
+def test_a_target_is_judged_on_the_figure_it_reports():
+    """A value a hair past its target that rounds to it (the reported figure, 3 decimals) passes, as a reader
+    recomputing ``value <= target`` from the JSON finds (a CI run once reported a target failed that its own
+    figures met)."""
+    result = {**_result(), "import": {"import_s": 0.5004, "runs_s": [0.5004]}}
+    (check,) = [c for c in target_checks(result, Targets(import_s=0.5)) if c["name"] == "import hbmp_bench [s]"]
+    assert check["value"] == 0.5 and check["passed"]
+
+
 def test_planner_memory_and_ray_targets():
     result = _result()
     result["towns"]["Town01"]["continuous"]["latency"] = {"planner": {"mean_ms": 1.2}}  # 1.2 raw steps of 1 ms
