@@ -40,13 +40,13 @@ _IMPORTED: dict[str, tuple] = {}
 
 
 def _import(src: Path, name: str, **options) -> None:
-    """``import_map(src, name, **options)`` the first time this module asks for ``name``; a second ask must
-    be for the same source and options (a test that wants others names its map differently)."""
+    """``import_map(src, name, **options)`` unless this module's last import of ``name`` had the same source and
+    options (a map asked for with other options, e.g. ``lights="lawful"``, is imported again in its place: the
+    names, and so the episodes drawn on them, stay those the tests were written against)."""
     key = (str(src), tuple(sorted(options.items())))
-    if name in _IMPORTED:
-        assert _IMPORTED[name] == key, (name, _IMPORTED[name], key)
+    if _IMPORTED.get(name) == key:
         return
-    import_map(src, name, **options)
+    import_map(src, name, force=name in _IMPORTED, **options)
     _IMPORTED[name] = key
 
 
@@ -206,25 +206,6 @@ def test_the_continuous_ego_turns_after_split_pieces():
         env.close()
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("town", REAL_TOWNS or ["none"])
-def test_sumo_keeps_its_lanes_by_the_detectors_on_every_route(town):
-    """SUMO's own driver on every route of every suite, from both formats: the wrong-lane and off-road detectors
-    flag nothing (before junction lanes counted as junction and crossings were kept off the road pieces between
-    two nodes, CARLA's Town01 .xodr showed 144 events, Town02 122, Town01 .net.xml 45). A failure names each place."""
-    from hbmp_bench.evaluation.lane_audit import audit_lane_keeping
-
-    for kind, src in _sources(town):
-        name = f"{town}_{kind}_lawful"
-        _import(src, name, lights="lawful")
-        audit = audit_lane_keeping(name)
-        assert audit.episodes == sum(selection_size(s.name, [name], s.tasks, range(s.episodes_per_task))
-                                     for s in SUITES.values())
-        assert audit.distance_km > 20.0 * audit.drives / 1000.0  # every drive went somewhere
-        assert not audit.stuck, audit.stuck
-        assert not audit.disagreements, "\n".join(map(str, audit.disagreements))
-
-
 @pytest.mark.parametrize("town", REAL_TOWNS or ["none"])
 def test_no_crossing_where_a_road_merely_continues(town):
     """Crossings only at nodes where roads meet: a crossing guessed at a node joining two pieces of one road
@@ -245,6 +226,30 @@ def test_no_crossing_where_a_road_merely_continues(town):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("town", REAL_TOWNS or ["none"])
+def test_sumo_keeps_its_lanes_by_the_detectors_on_every_route(town):
+    """SUMO's own driver on every route of every suite, from both formats: the wrong-lane and off-road detectors
+    flag nothing (before junction lanes counted as junction and crossings were kept off the road pieces between
+    two nodes, CARLA's Town01 .xodr showed 144 events, Town02 122, Town01 .net.xml 45). A failure names each place.
+    CARLA's own .net.xml is audited for the paper's Town01 and Town02 only (each audit is 1.5-2.5 min of CI's
+    30; the other towns' .net.xml imports keep the lane, route and traffic checks above); ``hbmp-bench maps
+    audit NAME`` audits any import."""
+    from hbmp_bench.evaluation.lane_audit import audit_lane_keeping
+
+    for kind, src in _sources(town):
+        if kind == "net" and town not in ("Town01", "Town02"):
+            continue
+        name = f"{town}_{kind}"
+        _import(src, name, lights="lawful")
+        audit = audit_lane_keeping(name)
+        assert audit.episodes == sum(selection_size(s.name, [name], s.tasks, range(s.episodes_per_task))
+                                     for s in SUITES.values())
+        assert audit.distance_km > 20.0 * audit.drives / 1000.0  # every drive went somewhere
+        assert not audit.stuck, audit.stuck
+        assert not audit.disagreements, "\n".join(map(str, audit.disagreements))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("town", REAL_TOWNS or ["none"])
 def test_the_continuous_experts_speeds_in_bends_stay_physical(town):
     """Peak lateral acceleration (mean speed x mean yaw rate over any second) of the continuous expert on each
     format stays within the planner's 4 m/s². (Event fidelity does not: SUMO moves the ego along its lane at the
@@ -255,7 +260,7 @@ def test_the_continuous_experts_speeds_in_bends_stay_physical(town):
 
     agent = load_agent("expert")
     for kind, src in _sources(town):
-        name = f"{town}_{kind}_lawful"
+        name = f"{town}_{kind}"
         _import(src, name, lights="lawful")
         for task in ("OneTurn", "Navigation"):
             env = BehaviorEnv(town=name, task=task, suite="hbmp", fidelity="continuous", **agent_env_kwargs(agent))
