@@ -62,8 +62,7 @@ def shipped_checkpoint(name: str) -> str:
         raise FileNotFoundError(
             f"no shipped checkpoint for agent {name!r} (hbmp_bench/agents/checkpoints/{name}.pt). Produce it with "
             f"`{TRAIN_COMMANDS[name]}`, then copy runs/{name}/best.pt (policy.pt without --validate-every) to "
-            f"that place, or load any checkpoint "
-            f"with --agent path/to/policy.pt")
+            f"that place, or load any checkpoint with --agent path/to/policy.pt")
     return path
 
 

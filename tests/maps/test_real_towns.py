@@ -31,8 +31,8 @@ def _module_maps(tmp_path_factory) -> Path:
 
 @pytest.fixture(autouse=True)
 def _isolated_user_maps(_module_maps, monkeypatch):
-    """This module's tests share one user data folder (not the real one): each import of a CARLA town is made
-    once (:func:`_import`), not once per test (64 imports of 0.5-2 s each)."""
+    """This module's tests share one user data folder (not the real one): a CARLA town is imported once per
+    name and options in a row (:func:`_import`), not once per test (64 imports of 0.5-2 s each)."""
     monkeypatch.setenv("HBMP_BENCH_DATA", str(_module_maps))
 
 
