@@ -30,6 +30,10 @@ DEFAULT_FIDELITY: str = "continuous"
 REWARD_MODES: tuple[str, ...] = ("dense", "sparse")
 """The env's behavior reward: ``dense`` r_k + r_T (HBMP), ``sparse`` r_T only (HBMP-S)."""
 
+ENV_REWARDS: tuple[str, ...] = (*REWARD_MODES, "carla")
+"""The env's ``reward`` option: a behavior reward of :data:`REWARD_MODES`, or ``carla``, CARLA's reinforcement
+learning baseline reward paid every step (:data:`~hbmp_bench.metrics.episode.CARLA_RL_REWARD`)."""
+
 TRAINING_REWARD_MODES: tuple[str, ...] = (*REWARD_MODES, "env")
 """What a training run learns from: a behavior reward of :data:`REWARD_MODES` (taken from the env's
 ``info["reward_components"]``), or ``env``, the reward the env returns (the flat baseline's control
@@ -48,5 +52,5 @@ DETECTED_KINDS: tuple[str, ...] = tuple(k for k in INFRACTION_KINDS if k != "col
 """The kinds the SUMO detectors report each simulation step (``collision_other``, an obstacle, comes
 only from the highway-env transfer env)."""
 
-__all__ = ["BEHAVIORS", "COLLISION_KINDS", "DEFAULT_FIDELITY", "DETECTED_KINDS", "FIDELITIES", "INFRACTION_KINDS",
+__all__ = ["BEHAVIORS", "COLLISION_KINDS", "DEFAULT_FIDELITY", "DETECTED_KINDS", "ENV_REWARDS", "FIDELITIES", "INFRACTION_KINDS",
            "NUM_BEHAVIORS", "REWARD_MODES", "TRAINING_REWARD_MODES", "VIOLATION_KINDS"]

@@ -20,8 +20,9 @@ from hbmp_bench.maps import available_maps
 from hbmp_bench.scenarios import (SCENARIO_TYPES, Episode, Traffic, check_task, check_town, get_suite, sample_episode,
                                   suite_episodes, traffic_for, with_agents)
 from hbmp_bench.errors import ConfigError
+from hbmp_bench.vocabulary import ENV_REWARDS
 
-REWARDS = ("dense", "sparse")
+REWARDS = ENV_REWARDS
 EGO_DRIVERS = ("behavior", "control")
 
 
@@ -151,7 +152,9 @@ class WorldConfig:
             :class:`~hbmp_bench.envs.drivers.ControlDriver`; continuous fidelity only).
         background_fidelity: the background agents' (default ``event``).
         reward: ``dense`` (r_k + r_T, HBMP: r_k = lambda(c~_total) of the executed trajectory,
-            0 in event fidelity) or ``sparse`` (r_T only, HBMP-S).
+            0 in event fidelity), ``sparse`` (r_T only, HBMP-S) or ``carla`` (CARLA's reinforcement-learning
+            baseline reward, paid every step: route progress, speed gained, overlap events; no r_T:
+            :data:`~hbmp_bench.metrics.episode.CARLA_RL_REWARD`).
         decision_period_s: simulated time per decision in event fidelity [s] (paper: 10 Hz).
         behavior: the v_ref rule of speed_up / speed_down, shared by both fidelities.
         continuous: planner, executor and vehicle-model options of the continuous fidelity.

@@ -20,6 +20,9 @@ the lane width and its heading error divided by π/2, both clipped to [-2, 2].
 (:func:`hbmp_bench.planning.instant_costs`), the paper's baseline reward without the velocity term;
 ``dt`` = 0.1 s keeps Σr_t on HBMP's per-second scale (one r_k per ~1 s behavior).
 ``reward="sparse"``: r_T only.
+``reward="carla"``: CARLA's reinforcement-learning baseline reward (the A3C row of the paper's Tab. I), paid every
+step: 1 per metre of route progress, 0.05 per km/h of speed gained, −2 per collision, off-road or wrong-lane event
+(:data:`~hbmp_bench.metrics.episode.CARLA_RL_REWARD`); no r_T (``info["reward_components"]`` logs it).
 """
 
 from __future__ import annotations

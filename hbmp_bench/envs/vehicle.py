@@ -36,7 +36,7 @@ from hbmp_bench.envs.privileged import LIGHTS_RANGE_M, PrivilegedScene
 from hbmp_bench.envs.scene import Scene
 from hbmp_bench.maps.roadnet import RoadNetwork
 from hbmp_bench.metrics.detectors import EVENT_KINDS, EgoFrame, InfractionDetector, StepEvents, StopLine, update_all
-from hbmp_bench.metrics.episode import GOAL_UNREACHABLE, EpisodeScorer, events_reward
+from hbmp_bench.metrics.episode import GOAL_UNREACHABLE, EpisodeScorer, carla_rl_reward, events_reward
 from hbmp_bench.metrics.geometry import LaneLocator, stop_line_of
 from hbmp_bench.planning.behaviors import BEHAVIORS, Behavior
 from hbmp_bench.scenarios import Episode
@@ -60,7 +60,8 @@ class Shared:
     net: RoadNetwork
     locator: LaneLocator
     observer: ObservationBuilder
-    dense_reward: bool
+    reward: str
+    """``WorldConfig.reward``: dense, sparse or carla."""
     long_route: Callable[[np.random.Generator, str], list[str]]
 
 
@@ -135,6 +136,8 @@ class ControlledVehicle:
         self.control: list[float] | None = None
         """The last control vector ``[a, s]`` (a driver without behaviors), as given."""
         route.attach(self)
+        self._paid = (self.progress_m(), self.state.speed)
+        """Route progress [m] and speed [m/s] at the last reward ``carla`` paid."""
         driver.follow(route.begin_lane(), self.next_edges(), self.next_lanes())
 
     @property
@@ -234,17 +237,32 @@ class ControlledVehicle:
         is paid only when the behavior has ended. ``occupancy``: M_t, when the world built it (see :meth:`observe`)."""
         obs, info = self.observe(events, occupancy)
         r_terminal = events_reward(events, timed_out=self.end_reason in GOAL_UNREACHABLE)
-        r_k = self.driver.behavior_reward() if behavior_ended else 0.0
         if behavior_ended:
-            if self.driver.behaviors:
-                info["behavior"] = BEHAVIORS[self.behavior]
-                info["behavior_executed"] = BEHAVIORS[self.executed]
-            else:
-                info["control"] = self.control
-            info["duration_s"] = round(self.shared.sim.time - self.behavior_start_s, 6)
-            info["planner_costs"] = self.driver.behavior_costs()
+            self._behavior_info(info)
+        if self.shared.reward == "carla":  # paid every step; r_T only logged
+            now = (self.progress_m(), self.state.speed)
+            reward = carla_rl_reward(now[0] - self._paid[0], now[1] - self._paid[1], events)
+            self._paid = now
+            info["reward_components"] = {"r_k": 0.0, "r_T": r_terminal, "r_carla": reward}
+            return obs, reward, info
+        r_k = self.driver.behavior_reward() if behavior_ended else 0.0
         info["reward_components"] = {"r_k": r_k, "r_T": r_terminal}
-        return obs, r_terminal + (r_k if self.shared.dense_reward else 0.0), info
+        return obs, r_terminal + (r_k if self.shared.reward == "dense" else 0.0), info
+
+    def _behavior_info(self, info: dict) -> None:
+        """The ended behavior's (or control step's) keys of ``info``."""
+        if self.driver.behaviors:
+            info["behavior"] = BEHAVIORS[self.behavior]
+            info["behavior_executed"] = BEHAVIORS[self.executed]
+        else:
+            info["control"] = self.control
+        info["duration_s"] = round(self.shared.sim.time - self.behavior_start_s, 6)
+        info["planner_costs"] = self.driver.behavior_costs()
+
+    def progress_m(self) -> float:
+        """Progress along a goal route [m] (0 on a circulating route, which has no goal)."""
+        score = getattr(self.route, "score", None)
+        return 0.0 if score is None else float(score.progress_m)
 
     def occupancy_request(self) -> tuple:
         """The arguments of :meth:`ObservationBuilder.occupancy` for M_t now (the world builds every vehicle's

@@ -146,7 +146,7 @@ class DrivingWorld:
         if self.script is not None:
             self.script.start(self.sim)
         self.sim.step()
-        shared = Shared(self.sim, self.net, self.locator, self.observer, self.config.reward == "dense", self.long_route)
+        shared = Shared(self.sim, self.net, self.locator, self.observer, self.config.reward, self.long_route)
         self.vehicles = {}
         for name, leg in zip(self.goal_ids, episode.agents):
             if self.sim.vehicle_state(name) is None:

@@ -30,6 +30,14 @@ ended it (a red light then pays −60, a wrong lane −51). With the paper's val
 by the cheapest violation (−1) beats every attempt that may time out (−50): a policy that cannot yet reach
 the goal learns to leave the lane within two seconds, as the flat baseline did (``agents/checkpoints/flat.md``)."""
 
+CARLA_RL_REWARD = {"progress_per_m": 1.0, "speed_gain_per_kmh": 0.05, "event": -2.0}
+"""CARLA's reinforcement-learning baseline reward (Dosovitskiy et al. 2017, the A3C row of the paper's Tab. I):
+``1000 (d_{t-1} - d_t) + 0.05 (v_t - v_{t-1}) - 2e-5 (c_t - c_{t-1}) - 2 (s_t - s_{t-1}) - 2 (o_t - o_{t-1})`` with
+``d`` the distance to the goal [km], ``v`` the speed [km/h], ``c`` collision damage and ``s``, ``o`` the car's overlap
+with the sidewalk and the opposite lane [0, 1]. Here ``d`` is progress along the route [m] (so 1 per metre), and
+each collision, off-road or wrong-lane event counts as a whole overlap (``event``: the detectors give the onset of
+an event, not an overlap fraction nor a damage). No goal term: an episode's end only stops the progress it pays."""
+
 GOAL_UNREACHABLE = ("timeout", "left_network", "violation")
 """End reasons that pay ``TERMINAL_REWARD["timeout"]``: the goal can no longer be reached."""
 
@@ -55,6 +63,14 @@ def events_reward(ev: StepEvents, timed_out: bool = False) -> float:
     """r_T of the detectors' events ``ev``."""
     return terminal_reward(goal=ev.goal_reached, collisions=ev.collisions, timed_out=timed_out,
                            red_light=ev.red_light, wrong_lane=ev.wrong_lane, off_road=ev.off_road)
+
+
+def carla_rl_reward(progress_m: float, speed_gain_mps: float, ev: StepEvents) -> float:
+    """``CARLA_RL_REWARD`` of ``progress_m`` [m] along the route, ``speed_gain_mps`` [m/s] and the events ``ev``
+    since the last payment."""
+    w = CARLA_RL_REWARD
+    events = ev.collisions + ev.off_road + ev.wrong_lane
+    return float(w["progress_per_m"] * progress_m + w["speed_gain_per_kmh"] * 3.6 * speed_gain_mps + w["event"] * events)
 
 
 def add_events(total: StepEvents, ev: StepEvents) -> None:

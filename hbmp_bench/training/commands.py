@@ -25,6 +25,7 @@ import time
 from hbmp_bench.errors import Interrupted, UserError
 from hbmp_bench.locks import Busy, exclusive_lock
 from hbmp_bench.policies.checkpoints import KINDS
+from hbmp_bench.vocabulary import ENV_REWARDS
 
 DEFAULT_EPISODES = {"il": 3000, "hbmp": 6000, "hbmp-s": 6000, "flat": 6000, "flat-il": 200}
 """Paper: 6000 RL episodes; DAgger's α starts decaying after 3000 (its IL budget is not given); flat-il: the
@@ -48,7 +49,8 @@ def _command_line(args: argparse.Namespace) -> str:
              "--workers", str(args.workers), "--seed", str(args.seed), "--out", args.out]
     for flag, value in (("--agents", str(args.agents) if (args.agents or 1) > 1 else None),
                         ("--fidelity", args.fidelity), ("--observation", args.observation),
-                        ("--road-profile", args.road_profile), ("--density", args.density), ("--init", args.init), ("--resume", args.resume),
+                        ("--road-profile", args.road_profile), ("--density", args.density), ("--reward", args.reward),
+                        ("--init", args.init), ("--resume", args.resume),
                         ("--critic-warmup", None if args.critic_warmup is None else str(args.critic_warmup)),
                         ("--backend", None if args.backend == "process" else args.backend),
                         ("--address", args.address)):
@@ -92,7 +94,7 @@ def resolve_init(kind: str, init: str | None) -> str | None:
 INPUT_OPTIONS = ("observation", "road_profile")
 """Env options a PPO run takes from its ``--init`` checkpoint when the command does not give them: the network's
 inputs must be what the initial actor was trained on."""
-RUN_OPTIONS = ("fidelity", "observation", "road_profile", "density", "agents")
+RUN_OPTIONS = ("fidelity", "observation", "road_profile", "density", "reward", "agents")
 """Env options a ``--resume`` takes from the checkpoint when the command does not give them: the run goes on as
 it began."""
 
@@ -162,6 +164,9 @@ def _check_kind_options(args: argparse.Namespace) -> None:
         raise UserError(f"--ppo options apply to hbmp, hbmp-s and flat ({args.kind} is trained by DAgger)")
     if args.mask_actions and args.kind in CONTROL_KINDS:
         raise UserError(f"--mask-actions masks behaviors; {args.kind} drives with controls")
+    if args.reward is not None and args.kind != "flat":
+        raise UserError(f"--reward chooses the control env's reward for flat; {args.kind} learns from "
+                        f"{REWARD[args.kind] if REWARD[args.kind] != 'env' else 'the expert'}")
     if args.ppo and args.resume:
         raise UserError("a resumed run keeps the PPO options its checkpoint recorded; start a new --out to change "
                         "them")
@@ -182,7 +187,8 @@ def _env_config(args: argparse.Namespace, init: str | None):
         args.fidelity = DEFAULT_FIDELITY[kind]
     args.agents = int(args.agents or 1)
     env_kwargs = {k: v for k, v in (("fidelity", args.fidelity), ("observation", args.observation),
-                                    ("road_profile", args.road_profile), ("density", args.density))
+                                    ("road_profile", args.road_profile), ("density", args.density),
+                                    ("reward", args.reward))
                   if v is not None}
     entry_point = None
     if kind in CONTROL_KINDS:
@@ -294,6 +300,9 @@ def add_commands(subparsers) -> None:
                    help="env fidelity (default: il event, hbmp/hbmp-s continuous; flat: the control env's)")
     p.add_argument("--density", default=None, help="background traffic (empty, corl, regular, dense; default: the "
                                                     "scenario's)")
+    p.add_argument("--reward", choices=ENV_REWARDS, default=None,
+                   help="flat: the control env's reward: dense (the paper's baseline, r_T + sum r_t; default), sparse "
+                        "(r_T) or carla (CARLA's RL baseline reward: route progress, speed gained, overlap events)")
     p.add_argument("--mask-actions", action="store_true", help="mask infeasible behaviors in the policy")
     p.add_argument("--critic-warmup", type=int, default=None, metavar="EPISODES",
                    help=f"PPO: episodes at the start in which only the critic learns (default: "

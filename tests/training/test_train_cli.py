@@ -133,6 +133,8 @@ def test_clear_errors(il_run, tmp_path, capsys):
     assert "Town01-Straight-v0" in capsys.readouterr().err
     assert main(["train", "flat", "--fidelity", "event", "--out", str(tmp_path / "flat"), "--episodes", "1"]) == 2
     assert "continuous" in capsys.readouterr().err
+    assert main(["train", "hbmp", "--reward", "carla", "--out", str(tmp_path / "x"), *COMMON]) == 2
+    assert "--reward" in capsys.readouterr().err and not os.path.exists(tmp_path / "x")
     assert main(["train", "hbmp", "--ppo", "entropy=0.1", "--out", str(tmp_path / "x"), *COMMON]) == 2
     assert "entropy_coef" in capsys.readouterr().err and not os.path.exists(tmp_path / "x")
     assert main(["train", "hbmp", "--ppo", "anchor_coef=lots", "--out", str(tmp_path / "x"), *COMMON]) == 2
@@ -160,13 +162,20 @@ def test_clear_errors(il_run, tmp_path, capsys):
 
 
 def test_flat_trains_on_the_control_env_and_is_evaluated_there(tmp_path):
-    """The flat baseline: PPO on [accel, steer]; the evaluation builds the env its policy asks for."""
+    """The flat baseline: PPO on [accel, steer], here on CARLA's RL reward (``--reward carla``, which the
+    checkpoint records for a resume; the log keeps the paper's r_T beside it); the evaluation builds the env its
+    policy asks for."""
     from hbmp_bench.evaluation import evaluate
+    from hbmp_bench.training.commands import RUN_OPTIONS, recorded_env_options
 
     out = str(tmp_path / "flat")
     assert main(["train", "flat", "--episodes", "1", "--workers", "1", "--out", out, "--scenario", SCENARIO,
-                 "--seed", "0", "--no-progress"]) == 0
-    _files_of_a_run(out, 1)
+                 "--seed", "0", "--no-progress", "--reward", "carla"]) == 0
+    row = {name: column[0] for name, column in _files_of_a_run(out, 1).items()}
+    assert recorded_env_options(os.path.join(out, "checkpoint.pt"), RUN_OPTIONS)["reward"] == "carla"
+    # the paper's r_T of how it ended is logged (no r_t beside it); the run learnt from another reward
+    assert row["r_T"] == row["r_T_plus_r_t"] and (row["r_T"] <= -50.0 or row["r_T"] == 100.0)
+    assert row["train_return"] != pytest.approx(0.01 * row["r_T"])
     policy = os.path.join(out, "policy.pt")
     agent = load_agent(policy)
     assert not agent.discrete and agent.env_factory.endswith("control_env:ControlEnv")
