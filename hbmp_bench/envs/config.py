@@ -22,7 +22,6 @@ from hbmp_bench.scenarios import (SCENARIO_TYPES, Episode, Traffic, check_task, 
 from hbmp_bench.errors import ConfigError
 from hbmp_bench.vocabulary import ENV_REWARDS
 
-REWARDS = ENV_REWARDS
 EGO_DRIVERS = ("behavior", "control")
 
 
@@ -193,8 +192,8 @@ class WorldConfig:
                              f"got {self.fidelity!r}")
         if self.background_fidelity not in FIDELITIES:
             raise ConfigError(f"background_fidelity must be one of {FIDELITIES}, got {self.background_fidelity!r}")
-        if self.reward not in REWARDS:
-            raise ConfigError(f"reward must be one of {REWARDS}, got {self.reward!r}")
+        if self.reward not in ENV_REWARDS:
+            raise ConfigError(f"reward must be one of {ENV_REWARDS}, got {self.reward!r}")
         if self.decision_period_s < self.step_length_s - 1e-9:
             raise ConfigError("decision_period_s must be >= step_length_s")
         if abs(self.continuous.executor.dt - self.step_length_s) > 1e-9:

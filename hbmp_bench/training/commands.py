@@ -165,8 +165,7 @@ def _check_kind_options(args: argparse.Namespace) -> None:
     if args.mask_actions and args.kind in CONTROL_KINDS:
         raise UserError(f"--mask-actions masks behaviors; {args.kind} drives with controls")
     if args.reward is not None and args.kind != "flat":
-        raise UserError(f"--reward chooses the control env's reward for flat; {args.kind} learns from "
-                        f"{REWARD[args.kind] if REWARD[args.kind] != 'env' else 'the expert'}")
+        raise UserError(f"--reward chooses the control env's reward for flat; {args.kind}'s reward is its kind's")
     if args.ppo and args.resume:
         raise UserError("a resumed run keeps the PPO options its checkpoint recorded; start a new --out to change "
                         "them")
