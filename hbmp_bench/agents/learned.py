@@ -1,4 +1,5 @@
-"""Learned agents: il (DAgger), hbmp (PPO, r_k + r_T), hbmp-s (PPO, r_T only), flat (PPO on controls),
+"""Learned agents: il (DAgger), hbmp (PPO, r_k + r_T), hbmp-s (PPO, r_T only), flat (PPO on controls from a random
+actor, on CARLA's RL reward: Tab. I's RL baseline),
 flat-il (DAgger on the expert's controls, CIL) and flat-ilrl (PPO on controls from flat-il, CIRL).
 
 Each loads a checkpoint shipped in ``hbmp_bench/agents/checkpoints/<name>.pt`` (with a model card
@@ -32,7 +33,9 @@ TRAIN_COMMANDS = {
           "--density regular --out runs/il",
     "hbmp": "hbmp-bench train hbmp --episodes 6000 --workers 2 --seed 0 --density regular --out runs/hbmp",
     "hbmp-s": "hbmp-bench train hbmp-s --episodes 6000 --workers 2 --seed 0 --density regular --out runs/hbmp-s",
-    "flat": "hbmp-bench train flat --episodes 1000 --workers 2 --seed 0 --density regular --out runs/flat",
+    "flat": "hbmp-bench train flat --reward carla --agents 8 --episodes 6000 --workers 2 --seed 0 --density regular "
+            "--ppo init_std=0.1 --ppo mini_batch_size=256 --ppo overlap_update=true --validate-every 500 "
+            "--validate-episodes 10 --out runs/flat",
     "flat-il": "hbmp-bench train flat-il --episodes 200 --workers 1 --seed 0 --density regular --validate-every 50 "
                "--validate-episodes 5 --out runs/flat-il",
     "flat-ilrl": "hbmp-bench train flat --init flat-il --agents 8 --episodes 3000 --workers 2 --seed 0 --density regular "

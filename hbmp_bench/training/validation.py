@@ -11,7 +11,8 @@ Every ``validate_every`` episodes the run evaluates its current actor on the ``h
 episodes drawn from their own seed: not the test suites' episodes) with the package's evaluator (isolated
 processes, as ``evaluate`` runs agents; the actor is the run's own, written by the trainer a moment before, so it
 is trusted: no namespace sandbox, which a host without bubblewrap could not give), appends a row to
-``validation.csv`` and writes the actor to ``best.pt`` when its success is the best so far (ties: the later one). A fresh run validates its initial actor first (episode 0), so
+``validation.csv`` and writes the actor to ``best.pt`` when it ranks best so far (:func:`validation_rank`: success,
+then route completion; ties: the later one). A fresh run validates its initial actor first (episode 0), so
 the ``il`` baseline is the first row. The training workers wait meanwhile; 40 continuous episodes take
 41-57 s with 2 slots on a quiet 2-core machine (4-7 min where other work ran beside).
 """
@@ -76,6 +77,13 @@ def validate(policy: str, workers: int, fidelity: str | None = None, episodes: i
     }
 
 
+def validation_rank(success: float, route_completion: float) -> tuple[float, float]:
+    """How validations are ranked for ``best.pt``: by success, then by mean route completion (a policy that reaches
+    no goal, e.g. ``flat`` from a random actor, is still told apart by how far it drives); equal ranks go to the later
+    actor."""
+    return (float(success), float(route_completion))
+
+
 def validation_results(out: str) -> dict[str, str]:
     """Model-card lines of a run's ``validation.csv``: its first, best and last rows (empty without one)."""
     from hbmp_bench.training.runlog import read_csv
@@ -85,7 +93,8 @@ def validation_results(out: str) -> dict[str, str]:
     if not rows:
         return {}
     episode, success = rows["episode"], rows["success"]
-    best = int(np.flatnonzero(success == success.max())[-1])
+    ranks = [validation_rank(s, c) for s, c in zip(success, rows["route_completion"])]
+    best = max(range(len(ranks)), key=lambda i: (ranks[i], i))
     line = lambda i: f"{success[i]:.1%} at episode {int(episode[i])}"  # noqa: E731
     return {f"greedy success on {VALIDATION_SUITE}, first": line(0),
             f"greedy success on {VALIDATION_SUITE}, best (best.pt)": line(best),
@@ -113,8 +122,9 @@ class Validator:
         self.log = CsvLog(os.path.join(out, "validation.csv"), VALIDATION_COLUMNS, keep_through=resumed_at) \
             if every > 0 else None
         done = read_csv(os.path.join(out, "validation.csv")) if self.log is not None else {}
-        episodes, success = list(done.get("episode", [])), list(done.get("success", []))
-        self.best = max(success) if success else -1.0
+        episodes = list(done.get("episode", []))
+        ranks = [validation_rank(s, c) for s, c in zip(done.get("success", []), done.get("route_completion", []))]
+        self.best = max(ranks) if ranks else (-1.0, -1.0)
         self.last = int(max(episodes)) if episodes else None
 
     def due(self, episodes: int) -> bool:
@@ -136,8 +146,9 @@ class Validator:
             row = {"episode": episodes, **validate(policy, self.workers, self.fidelity, self.episodes)}
         self.log.write(row)
         self.last = episodes
-        if row["success"] >= self.best:
-            self.best = row["success"]
+        rank = validation_rank(row["success"], row["route_completion"])
+        if rank >= self.best:
+            self.best = rank
             save_checkpoint(os.path.join(self.out, "best.pt"), actor)
         return row
 

@@ -217,7 +217,8 @@ def test_metric_road_profile_travels_from_training_to_evaluation(tmp_path):
 
 def test_validation_rows_and_best_policy(il_run, tmp_path):
     """--validate-every: the initial actor first, then the greedy policy every N episodes on hbmp-val;
-    best.pt is the best row's actor (ties: the later one) and acts; a resume keeps the rows before it."""
+    best.pt is the best row's actor (success, then route completion; ties: the later one) and acts; a resume keeps
+    the rows before it."""
     out = str(tmp_path / "hbmp-val")
     il_policy = os.path.join(il_run, "policy.pt")
     assert main(["train", "hbmp", "--episodes", "2", "--workers", "1", "--out", out, "--init", il_policy,
@@ -231,7 +232,8 @@ def test_validation_rows_and_best_policy(il_run, tmp_path):
     assert set(best) >= {"kind", "model", "actor_state_dict"} and "critic_state_dict" not in best
     final = torch.load(os.path.join(out, "policy.pt"), weights_only=True)
     il = torch.load(il_policy, weights_only=True)
-    chosen = final if rows["success"][1] >= rows["success"][0] else il
+    later_ranks = (rows["success"][1], rows["route_completion"][1]) >= (rows["success"][0], rows["route_completion"][0])
+    chosen = final if later_ranks else il
     assert all(torch.equal(chosen["actor_state_dict"][k], v) for k, v in best["actor_state_dict"].items())
     _acts(os.path.join(out, "best.pt"))
     card = open(os.path.join(out, "MODEL_CARD.md")).read()
@@ -241,6 +243,26 @@ def test_validation_rows_and_best_policy(il_run, tmp_path):
                  "--validate-episodes", "1", "--resume", os.path.join(out, "checkpoint.pt"), *COMMON]) == 0
     again = read_csv(os.path.join(out, "validation.csv"))
     assert again["episode"].tolist()[:2] == rows["episode"].tolist(), "rows up to the checkpoint are kept"
+
+
+def test_validation_ranks_success_then_route_completion(tmp_path):
+    """best.pt's choice among validations: success first; at equal success (e.g. none reach a goal) the one that
+    drove further; at an equal rank the later one. The model card names the same row."""
+    from hbmp_bench.training.validation import VALIDATION_COLUMNS, validation_rank, validation_results
+
+    assert validation_rank(0.5, 0.1) > validation_rank(0.45, 0.9)
+    assert validation_rank(0.0, 0.15) > validation_rank(0.0, 0.14)
+    def best_of(rows):
+        with open(tmp_path / "validation.csv", "w") as f:
+            f.write(",".join(VALIDATION_COLUMNS) + "\n")
+            for episode, success, completion in rows:
+                f.write(f"{episode},{success},{success},{success},{completion},0,0,0,0,20,1.0\n")
+        return validation_results(str(tmp_path))["greedy success on hbmp-val, best (best.pt)"]
+
+    rows = [(0, 0.0, 0.10), (500, 0.0, 0.15), (1000, 0.0, 0.12)]
+    assert best_of(rows) == "0.0% at episode 500"
+    assert best_of([*rows, (1500, 0.0, 0.15)]) == "0.0% at episode 1500"
+    assert best_of([*rows, (1500, 0.05, 0.01)]) == "5.0% at episode 1500"
 
 
 def test_validation_needs_no_sandbox(il_run, monkeypatch):
