@@ -468,6 +468,12 @@ def submit(
         salt_commitment=result.salt_commitment, salt=result.salt,
     )
     snapshot.check_unchanged()
-    path = write_json(entry_path(board_dir, spec.name, agent, doc["subset"], doc["fidelity"]), doc)
+    target = entry_path(board_dir, spec.name, agent, doc["subset"], doc["fidelity"])
+    try:  # the checks every later render and submission make: a file they would refuse is never written
+        verify_results(doc, str(target), against_suite=False)
+    except ForgedResultsError as refused:
+        raise ForgedResultsError(str(target), [*refused.problems, f"nothing was written (the records are left in "
+                                                                  f"{result.path} for inspection)"]) from None
+    path = write_json(target, doc)
     render_readme(board_dir, spec.name)
     return path, doc

@@ -15,6 +15,7 @@ from hbmp_bench.cli import main
 from hbmp_bench.evaluation.evaluate import code_fingerprint
 from hbmp_bench.evaluation import RunnerLimits
 from hbmp_bench.evaluation.leaderboard import (
+    ForgedResultsError,
     StaleResultsError,
     add_results,
     entry_path,
@@ -85,6 +86,33 @@ def test_a_resubmission_resumes_from_its_records(board):
                        progress=False)
     assert doc["complete"] and doc["summary"]["episodes"] == 2
     assert doc["provenance"]["wall_time_s"] is None  # nothing ran: no wall time to report
+
+
+def test_a_submission_the_board_would_refuse_writes_nothing(board, tmp_path, monkeypatch):
+    """Records the board's checks refuse (here: a success that ended at the timeout; on the `hbmp` board a goal
+    after a violation was one) stop the submission before its results file is written: the board stays
+    renderable and open to the next submission."""
+    import dataclasses
+
+    from hbmp_bench.evaluation import leaderboard
+
+    copy = tmp_path / "board"
+    shutil.copytree(board, copy)
+    real = leaderboard.evaluate
+
+    def contradicting(*args, **kwargs):
+        result = real(*args, **kwargs)
+        first, *rest = result.records
+        return dataclasses.replace(result, records=(
+            dataclasses.replace(first, end_reason="timeout", timeout=True, success=True), *rest))
+
+    monkeypatch.setattr(leaderboard, "evaluate", contradicting)
+    before = sorted(p.name for p in (copy / tiny_suite.NAME).iterdir())
+    with pytest.raises(ForgedResultsError, match="nothing was written"):
+        submit(tiny_suite.NAME, "expert", board_dir=copy, fidelity="event", workers=1, limits=TINY, progress=False)
+    assert sorted(p.name for p in (copy / tiny_suite.NAME).iterdir()) == before
+    monkeypatch.setattr(leaderboard, "evaluate", real)
+    render_readme(copy, tiny_suite.NAME)  # what is on the board still renders
 
 
 def test_a_stale_results_file_is_refused_with_a_clear_message(board, tmp_path):
