@@ -36,6 +36,20 @@ def test_readme_is_short_and_the_tour_is_on_the_first_screen():
     assert tour < 40, f"the tour starts at line {tour + 1}"
 
 
+def _claims_table(text: str) -> str:
+    start = text.index("\n| the paper's claim |") + 1
+    return text[start:text.index("\n\n", start)]
+
+
+def test_the_readme_states_the_claims_the_reproduction_page_and_the_site_show():
+    """The README's results table is the paper-reproduction page's first table (the site's claims): one table, so
+    a verdict changed in one place cannot be left behind in the other."""
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    page = (ROOT / "docs" / "paper-reproduction.md").read_text(encoding="utf-8")
+    assert _claims_table(readme) == _claims_table(page)
+    assert _claims_table(readme).count("\n") >= 9
+
+
 def test_readme_links_resolve():
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     links = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text)
