@@ -124,8 +124,13 @@ class Validator:
         done = read_csv(os.path.join(out, "validation.csv")) if self.log is not None else {}
         episodes = list(done.get("episode", []))
         ranks = [validation_rank(s, c) for s, c in zip(done.get("success", []), done.get("route_completion", []))]
-        self.best = max(ranks) if ranks else (-1.0, -1.0)
+        self.best_rank = max(ranks) if ranks else (-1.0, -1.0)
         self.last = int(max(episodes)) if episodes else None
+
+    @property
+    def best(self) -> float:
+        """Success of the best validation so far (``best.pt``'s); -1 before the first."""
+        return self.best_rank[0]
 
     def due(self, episodes: int) -> bool:
         """Whether the run should validate at this episode count (first call of a fresh run: yes)."""
@@ -147,8 +152,8 @@ class Validator:
         self.log.write(row)
         self.last = episodes
         rank = validation_rank(row["success"], row["route_completion"])
-        if rank >= self.best:
-            self.best = rank
+        if rank >= self.best_rank:
+            self.best_rank = rank
             save_checkpoint(os.path.join(self.out, "best.pt"), actor)
         return row
 
