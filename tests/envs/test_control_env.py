@@ -40,7 +40,8 @@ def test_throttle_and_lane_keeping_steer_move_the_ego_along_its_lane():
 
 @pytest.mark.slow
 def test_the_carla_reward_pays_route_progress_and_speed_gained_and_logs_r_T():
-    """``reward="carla"``: the step rewards sum to the route progress [m] (the episode scorer's) plus 0.05 per km/h of speed gained since the start, as CARLA's RL baseline is paid."""
+    """``reward="carla"``: the step rewards sum to the route progress [m] (the episode scorer's) plus 0.05 per km/h
+    of speed gained since the start, as CARLA's RL baseline is paid."""
     env = ControlEnv(town="Town01", task="Straight", episode_index=0, reward="carla")
     obs, info = env.reset(seed=0)
     speed0, total, steps = info["scene"]["speed_mps"], 0.0, []

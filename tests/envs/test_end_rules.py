@@ -43,7 +43,7 @@ def test_the_flat_episode_that_crossed_its_goal_leaving_the_road_is_a_violation(
 
     [record] = run_jobs([Job("hbmp", "Town01", "Straight", "flat", (8,), "continuous")], workers=1,
                         limits=RunnerLimits(trust_agent=True))
-    row = record.to_dict() if hasattr(record, "to_dict") else vars(record)
+    row = record.to_dict()
     assert row["off_road"] >= 1 and row["route_completion"] > 0.9, row
     assert row["end_reason"] == "violation" and not row["success"], row
     assert record_problems(row, end_on_violation=True, end_on_collision=True) == []
