@@ -165,10 +165,24 @@ def comparison_series(episodes: dict[str, np.ndarray], window: int) -> dict[str,
     return {key: moving_average(columns[key], window) for key, _, _ in COMPARISON_PANELS}
 
 
-def plot_comparison(folders: Sequence[str], labels: Sequence[str], out: str, window: int = 50) -> str:
-    """The paper's ablation figure: r_T and r_T + Σr_t per episode for several runs, plus their
-    success rates and the share of their episodes that end at the timeout (a run that learns to
-    stand shows there), one PNG (trailing means over ``window`` episodes)."""
+def validation_series(folder: str) -> dict[str, np.ndarray] | None:
+    """A run's greedy validations from its ``validation.csv`` (None without one): ``episode`` (V,), ``success``
+    (V,) in [0, 1] and ``stderr`` (V,), the binomial standard error ``sqrt(p (1 - p) / n)`` of each success over
+    its ``n`` validation episodes: how far apart two validations of the same policy fall by the luck of the
+    episodes alone."""
+    path = os.path.join(folder, "validation.csv")
+    if not os.path.isfile(path):
+        return None
+    rows = read_csv(path)
+    success, n = rows["success"].astype(float), np.maximum(rows["episodes"].astype(float), 1.0)
+    return {"episode": rows["episode"], "success": success, "stderr": np.sqrt(success * (1.0 - success) / n)}
+
+
+def comparison_figure(folders: Sequence[str], labels: Sequence[str], window: int = 50):
+    """The figure of :func:`plot_comparison` (a matplotlib ``Figure``): the :data:`COMPARISON_PANELS` of every
+    run and, when any run has a ``validation.csv``, a last panel of its greedy validation success per validated
+    episode with a band of one standard error (:func:`validation_series`); a run's episode-0 validation is its
+    initial actor's (for PPO from ``il``: ``il``'s)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -176,7 +190,9 @@ def plot_comparison(folders: Sequence[str], labels: Sequence[str], out: str, win
 
     if len(folders) != len(labels):
         raise UserError("give one label per run folder")
-    fig, axes = plt.subplots(1, len(COMPARISON_PANELS), figsize=(5 * len(COMPARISON_PANELS), 3.8), sharey=False)
+    validations = [validation_series(folder) for folder in folders]
+    n_panels = len(COMPARISON_PANELS) + any(v is not None for v in validations)
+    fig, axes = plt.subplots(1, n_panels, figsize=(5 * n_panels, 3.8), sharey=False)
     for k, (folder, label) in enumerate(zip(folders, labels)):
         eps = read_csv(os.path.join(folder, "episodes.csv"))
         for ax, series in zip(axes, comparison_series(eps, window).values()):
@@ -185,8 +201,28 @@ def plot_comparison(folders: Sequence[str], labels: Sequence[str], out: str, win
         ax.set(xlabel="episode", ylabel=f"{name} (mean of {window})")
         if limits is not None:
             ax.set_ylim(*limits)
+    if n_panels > len(COMPARISON_PANELS):
+        ax = axes[-1]
+        for k, (label, v) in enumerate(zip(labels, validations)):
+            if v is None:
+                continue
+            ax.plot(v["episode"], v["success"], color=f"C{k}", marker="o", markersize=3, label=label)
+            ax.fill_between(v["episode"], np.maximum(v["success"] - v["stderr"], 0.0),
+                            np.minimum(v["success"] + v["stderr"], 1.0), color=f"C{k}", alpha=0.15, linewidth=0)
+        ax.set(xlabel="episode", ylabel="greedy validation success (± 1 s.e.)")
     axes[2].legend(fontsize=8)
     fig.tight_layout()
+    return fig
+
+
+def plot_comparison(folders: Sequence[str], labels: Sequence[str], out: str, window: int = 50) -> str:
+    """The paper's ablation figure: r_T and r_T + Σr_t per episode for several runs, plus their
+    success rates and the share of their episodes that end at the timeout (a run that learns to
+    stand shows there), and the greedy validations of the runs that have them (:func:`comparison_figure`);
+    one PNG (trailing means over ``window`` episodes); ``out``."""
+    import matplotlib.pyplot as plt
+
+    fig = comparison_figure(folders, labels, window)
     _save_fig(fig, out)
     plt.close(fig)
     return out

@@ -11,7 +11,7 @@ from hbmp_bench.cli import main
 from hbmp_bench.envs import make
 from hbmp_bench.locks import exclusive_lock
 from hbmp_bench.training.commands import TrainingRunning
-from hbmp_bench.training.runlog import EPISODE_COLUMNS, comparison_series, read_csv
+from hbmp_bench.training.runlog import EPISODE_COLUMNS, comparison_figure, comparison_series, read_csv
 
 SCENARIO = "hbmp_bench/Town02-Straight-v0"
 COMMON = ["--scenario", SCENARIO, "--seed", "0", "--no-progress", "--fidelity", "event"]
@@ -339,6 +339,40 @@ def test_the_ablation_figure_shows_a_run_that_learns_to_stand(tmp_path):
     assert list(series) == ["r_T", "r_T_plus_r_t", "success", "timeout"]
     assert series["timeout"].tolist() == [0.0, 0.0, 0.5, 1.0]
     assert series["success"].tolist() == [0.0, 0.5, 0.5, 0.0]
+
+
+def _episodes_csv(folder, n=4):
+    os.makedirs(folder, exist_ok=True)
+    with open(os.path.join(folder, "episodes.csv"), "w") as f:
+        f.write(",".join(EPISODE_COLUMNS) + "\n")
+        for episode in range(1, n + 1):
+            values = {"episode": episode, "end_reason": "goal", "success": 1}
+            f.write(",".join(str(values.get(c, 0)) for c in EPISODE_COLUMNS) + "\n")
+
+
+def test_the_comparison_figure_shows_greedy_validations_with_their_noise(tmp_path):
+    """A run with a ``validation.csv`` adds a panel of its greedy validations (one point per validation, a band of
+    one binomial standard error over its episodes); runs without one are left out of it, and a figure of runs
+    that have none keeps the four panels."""
+    from hbmp_bench.training.validation import VALIDATION_COLUMNS
+
+    plain, validated = str(tmp_path / "plain"), str(tmp_path / "validated")
+    _episodes_csv(plain)
+    _episodes_csv(validated)
+    with open(os.path.join(validated, "validation.csv"), "w") as f:
+        f.write(",".join(VALIDATION_COLUMNS) + "\n")
+        for episode, success in ((0, 0.925), (200, 0.9), (400, 1.0)):
+            values = {"episode": episode, "success": success, "episodes": 40}
+            f.write(",".join(str(values.get(c, 0)) for c in VALIDATION_COLUMNS) + "\n")
+    fig = comparison_figure([plain, validated], ["plain", "validated"], window=2)
+    panel = fig.axes[-1]
+    assert len(fig.axes) == 5 and "validation" in panel.get_ylabel()
+    (line,) = panel.get_lines()  # the plain run has no validations
+    assert line.get_xdata().tolist() == [0, 200, 400] and line.get_ydata().tolist() == [0.925, 0.9, 1.0]
+    (band,) = panel.collections
+    low = band.get_paths()[0].vertices[:, 1].min()
+    assert abs(low - (0.9 - (0.9 * 0.1 / 40) ** 0.5)) < 1e-9  # 40 episodes at 90 %: +- 4.7 points
+    assert len(comparison_figure([plain], ["plain"], window=2).axes) == 4
 
 
 def test_many_learners_are_recorded_and_a_resume_keeps_them(tmp_path):
