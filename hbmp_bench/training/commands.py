@@ -319,8 +319,8 @@ def add_commands(subparsers) -> None:
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_train)
 
-    p = subparsers.add_parser("curves", help="one PNG of r_T and r_T + Σr_t per episode for several training runs (and their greedy "
-                                   "validations, where they have a validation.csv)")
+    p = subparsers.add_parser("curves", help="one PNG of r_T and r_T + Σr_t per episode for several training runs "
+                                             "(and their greedy validations, where they have a validation.csv)")
     p.add_argument("runs", nargs="+", help="run folders (each with episodes.csv)")
     p.add_argument("--labels", nargs="*", default=None, help="one legend label per run (default: the folder names)")
     p.add_argument("--out", default="training_curves.png", help="PNG to write")

@@ -326,44 +326,43 @@ def test_ppo_names_the_fields_of_the_dedicated_flags():
         build_parser().parse_args(["train", "hbmp"]), None).critic_warmup_episodes == 0
 
 
+def _write_csv(folder, name, columns, rows):
+    """``folder/name`` with ``columns`` and one line per dict of ``rows`` (0 where a row has no value); its path."""
+    os.makedirs(folder, exist_ok=True)
+    path = os.path.join(folder, name)
+    with open(path, "w") as f:
+        f.write(",".join(columns) + "\n")
+        for values in rows:
+            f.write(",".join(str(values.get(c, 0)) for c in columns) + "\n")
+    return path
+
+
 def test_the_ablation_figure_shows_a_run_that_learns_to_stand(tmp_path):
     """The comparison figure's timeout panel: the share of episodes ending at the timeout, trailing."""
-    path = tmp_path / "episodes.csv"
     rows = [(1, "violation", 0), (2, "goal", 1), (3, "timeout", 0), (4, "timeout", 0)]
-    with open(path, "w") as f:
-        f.write(",".join(EPISODE_COLUMNS) + "\n")
-        for episode, reason, success in rows:
-            values = {"episode": episode, "end_reason": reason, "success": success, "r_T": -1, "r_T_plus_r_t": -2}
-            f.write(",".join(str(values.get(c, 0)) for c in EPISODE_COLUMNS) + "\n")
-    series = comparison_series(read_csv(str(path)), window=2)
+    path = _write_csv(str(tmp_path), "episodes.csv", EPISODE_COLUMNS,
+                      [{"episode": e, "end_reason": reason, "success": success, "r_T": -1, "r_T_plus_r_t": -2}
+                       for e, reason, success in rows])
+    series = comparison_series(read_csv(path), window=2)
     assert list(series) == ["r_T", "r_T_plus_r_t", "success", "timeout"]
     assert series["timeout"].tolist() == [0.0, 0.0, 0.5, 1.0]
     assert series["success"].tolist() == [0.0, 0.5, 0.5, 0.0]
-
-
-def _episodes_csv(folder, n=4):
-    os.makedirs(folder, exist_ok=True)
-    with open(os.path.join(folder, "episodes.csv"), "w") as f:
-        f.write(",".join(EPISODE_COLUMNS) + "\n")
-        for episode in range(1, n + 1):
-            values = {"episode": episode, "end_reason": "goal", "success": 1}
-            f.write(",".join(str(values.get(c, 0)) for c in EPISODE_COLUMNS) + "\n")
 
 
 def test_the_comparison_figure_shows_greedy_validations_with_their_noise(tmp_path):
     """A run with a ``validation.csv`` adds a panel of its greedy validations (one point per validation, a band of
     one binomial standard error over its episodes); runs without one are left out of it, and a figure of runs
     that have none keeps the four panels."""
+    import matplotlib.pyplot as plt
+
     from hbmp_bench.training.validation import VALIDATION_COLUMNS
 
     plain, validated = str(tmp_path / "plain"), str(tmp_path / "validated")
-    _episodes_csv(plain)
-    _episodes_csv(validated)
-    with open(os.path.join(validated, "validation.csv"), "w") as f:
-        f.write(",".join(VALIDATION_COLUMNS) + "\n")
-        for episode, success in ((0, 0.925), (200, 0.9), (400, 1.0)):
-            values = {"episode": episode, "success": success, "episodes": 40}
-            f.write(",".join(str(values.get(c, 0)) for c in VALIDATION_COLUMNS) + "\n")
+    for folder in (plain, validated):
+        _write_csv(folder, "episodes.csv", EPISODE_COLUMNS,
+                   [{"episode": e, "end_reason": "goal", "success": 1} for e in range(1, 5)])
+    _write_csv(validated, "validation.csv", VALIDATION_COLUMNS,
+               [{"episode": e, "success": success, "episodes": 40} for e, success in ((0, 0.925), (200, 0.9), (400, 1.0))])
     fig = comparison_figure([plain, validated], ["plain", "validated"], window=2)
     panel = fig.axes[-1]
     assert len(fig.axes) == 5 and "validation" in panel.get_ylabel()
@@ -372,7 +371,10 @@ def test_the_comparison_figure_shows_greedy_validations_with_their_noise(tmp_pat
     (band,) = panel.collections
     low = band.get_paths()[0].vertices[:, 1].min()
     assert abs(low - (0.9 - (0.9 * 0.1 / 40) ** 0.5)) < 1e-9  # 40 episodes at 90 %: +- 4.7 points
-    assert len(comparison_figure([plain], ["plain"], window=2).axes) == 4
+    plain_fig = comparison_figure([plain], ["plain"], window=2)
+    assert len(plain_fig.axes) == 4
+    plt.close(fig)
+    plt.close(plain_fig)
 
 
 def test_many_learners_are_recorded_and_a_resume_keeps_them(tmp_path):
